@@ -29,7 +29,7 @@ impl Gen<'_> {
         let (Some(ft), Some(tt)) = (parse(from), parse(to)) else {
             return None;
         };
-        if exprs.len() != 1 {
+        if self.check_only && exprs.len() != 1 {
             self.error(
                 codes::ARGUMENT_COUNT,
                 span,

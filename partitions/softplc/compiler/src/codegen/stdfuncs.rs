@@ -9,7 +9,7 @@ use crate::codes;
 use plc_vm::isa::{Builtin, MemType, Opcode, RoundMode};
 
 use crate::ast::*;
-use crate::codegen::Gen;
+use crate::codegen::{Gen, Place};
 use crate::diagnostics::Span;
 use crate::sema::{ops, stdfuncs as rules};
 use crate::types::*;
@@ -143,13 +143,8 @@ impl Gen<'_> {
         if name == "SIZEOF" {
             return Some(self.std_sizeof(id, args, expected, span));
         }
-        if let Some(a) = args.iter().find(|a| a.output) {
-            self.error(
-                codes::UNKNOWN_PARAMETER,
-                a.span,
-                format!("{} has no outputs", id.text),
-            );
-            self.surface(&a.value);
+        if self.check_only {
+            self.check_no_outputs(id, args);
         }
         if let Some(target) = name.strip_prefix("TO_") {
             return self.generic_conversion(target, id, args, span);
@@ -170,6 +165,7 @@ impl Gen<'_> {
             typed,
         };
         if let Some(t) = typed
+            && self.check_only
             && !self.typed_arguments(&c, t)
         {
             return Some(Type::Error);
@@ -207,6 +203,42 @@ impl Gen<'_> {
     /// Checks that the arguments of a typed form convert to its type implicitly (SEL's
     /// selector, MUX's index and EXPT's exponent are not typed). False after reporting one
     /// that does not.
+    /// Reports an output argument (`=>`) of the standard function `id`, which has none (the
+    /// checking pass asks).
+    fn check_no_outputs(&mut self, id: &Ident, args: &[Arg]) {
+        if let Some(a) = args.iter().find(|a| a.output) {
+            self.error(
+                codes::UNKNOWN_PARAMETER,
+                a.span,
+                format!("{} has no outputs", id.text),
+            );
+            self.surface(&a.value);
+        }
+    }
+
+    /// Reports what is wrong with `target` (the place `place`) as the output `part` of a
+    /// SPLIT_ function (the checking pass asks); `false` when it takes no integer.
+    fn check_split_output(&mut self, part: &str, place: &Place, target: &Expr) -> bool {
+        if !place.ty.is_integral() {
+            if !place.ty.is_error() {
+                let msg = format!(
+                    "the output {part} is an integer, not {}",
+                    self.tname(&place.ty)
+                );
+                self.error(codes::OUTPUT_TARGET, target.span, msg);
+            }
+            return false;
+        }
+        if !place.writable {
+            self.error(
+                codes::ASSIGN_TO_READ_ONLY,
+                target.span,
+                "output target is not writable",
+            );
+        }
+        true
+    }
+
     pub(super) fn typed_arguments(&mut self, c: &StdArgs, t: Elem) -> bool {
         let untyped = match c.name {
             "SEL" | "MUX" => 1,
@@ -458,13 +490,8 @@ impl Gen<'_> {
         if let TimeFunction::Split(t) = f {
             return self.std_split(t, id, args, span);
         }
-        if let Some(a) = args.iter().find(|a| a.output) {
-            self.error(
-                codes::UNKNOWN_PARAMETER,
-                a.span,
-                format!("{} has no outputs", id.text),
-            );
-            self.surface(&a.value);
+        if self.check_only {
+            self.check_no_outputs(id, args);
         }
         let Some(exprs) = self.std_arguments(&id.name, id, args) else {
             return Type::Error;
@@ -674,7 +701,7 @@ impl Gen<'_> {
                 (None, _) if i <= parts.len() => targets[i - 1] = Some(&a.value),
                 (Some(n), true) => match parts.iter().position(|p| *p == n.name) {
                     Some(k) => targets[k] = Some(&a.value),
-                    None => {
+                    None if self.check_only => {
                         let msg = format!(
                             "{} has no output `{}` (its outputs: {})",
                             id.text,
@@ -683,17 +710,23 @@ impl Gen<'_> {
                         );
                         self.error(codes::UNKNOWN_PARAMETER, n.span, msg);
                     }
+                    None => {}
                 },
-                _ => {
+                _ if self.check_only => {
                     let msg = format!("{} takes IN and the outputs {}", id.text, parts.join(", "));
                     self.error(codes::UNKNOWN_PARAMETER, a.span, msg);
                 }
+                _ => {}
             }
         }
-        let input_type_ok = input
-            .map(|e| (e, self.infer(e)))
-            .filter(|(_, t)| t.elem().is_some_and(|e| e.temporal_family() == family));
-        let Some((input, _)) = input_type_ok else {
+        let input_type_ok = input.filter(|e| {
+            !self.check_only
+                || self
+                    .infer(e)
+                    .value_elem()
+                    .is_some_and(|e| e.temporal_family() == family)
+        });
+        let Some(input) = input_type_ok else {
             match input {
                 None => self.error(
                     codes::MISSING_ARGUMENT,
@@ -721,30 +754,10 @@ impl Gen<'_> {
             let Some(place) = self.place(target) else {
                 continue;
             };
-            let Some(te) = place
-                .ty
-                .elem()
-                .filter(|e| e.is_integral() && !matches!(place.ty, Type::Enum(_)))
-            else {
-                if !place.ty.is_error() {
-                    let msg = format!(
-                        "the output {part} is an integer, not {}",
-                        self.tname(&place.ty)
-                    );
-                    self.error(codes::OUTPUT_TARGET, target.span, msg);
-                }
-                if matches!(place.loc, crate::codegen::Loc::Ind(_)) {
-                    self.op(Opcode::Drop);
-                }
+            if self.check_only && !self.check_split_output(part, &place, target) {
                 continue;
-            };
-            if !place.writable {
-                self.error(
-                    codes::ASSIGN_TO_READ_ONLY,
-                    target.span,
-                    "output target is not writable",
-                );
             }
+            let te = place.ty.value_elem().unwrap_or(Elem::LInt);
             self.emit(|b| b.ld_abs(MemType::I64, value));
             match *part {
                 "YEAR" | "MONTH" | "DAY" => {
@@ -791,9 +804,9 @@ impl Gen<'_> {
     }
 
     /// False (after reporting it and type-checking the arguments) unless the call has
-    /// exactly `n` arguments.
+    /// exactly `n` arguments (the checking pass asks; emission takes the count as checked).
     pub(super) fn arity(&mut self, c: &StdArgs, n: usize) -> bool {
-        if c.exprs.len() == n {
+        if !self.check_only || c.exprs.len() == n {
             return true;
         }
         self.error(
@@ -993,7 +1006,7 @@ impl Gen<'_> {
                 t
             }
             "MAX" | "MIN" => {
-                if c.exprs.len() < 2 {
+                if self.check_only && c.exprs.len() < 2 {
                     self.error(
                         codes::ARGUMENT_COUNT,
                         c.span,
@@ -1048,7 +1061,7 @@ impl Gen<'_> {
                 t
             }
             "MUX" => {
-                if c.exprs.len() < 2 {
+                if self.check_only && c.exprs.len() < 2 {
                     self.error(
                         codes::ARGUMENT_COUNT,
                         c.span,
@@ -1058,7 +1071,8 @@ impl Gen<'_> {
                     return Some(Type::Error);
                 }
                 let kt = self.expr(c.exprs[0], Some(&Type::DINT));
-                if !kt.elem().is_some_and(|e| e.is_integral()) && !kt.is_error() {
+                if self.check_only && !kt.elem().is_some_and(|e| e.is_integral()) && !kt.is_error()
+                {
                     return Some(self.bad_arg(c.exprs[0], &kt, "an integer selector"));
                 }
                 let n = c.exprs.len() as i64 - 1;
