@@ -36,15 +36,17 @@
 //! functions and the generic conversions from [`GenericTypes`], how a conversion takes its
 //! argument from [`ConversionArguments`] and every implicit conversion from [`Coercions`],
 //! the property of every access from [`Properties`], what every operator does from
-//! [`Operations`] (it only picks the opcodes), but still decides the operation of the other
-//! standard functions from their arguments' recorded types while it emits and passes the
-//! expression walk's check branches again (none can fail on a checked program). Besides the
-//! statement checker, the rules checked by the checking pass only are the operator and
-//! standard-function type rules (`sema::ops`, `sema::stdfuncs`), the implicit conversion
-//! rules (`types::implicit_conversion` and those of references), the recursion rule
-//! (`sema::body`), the argument rules (an unknown, misplaced, surplus or repeated argument
-//! of a user POU, a method or a standard function) and a function block input's assignment
-//! rules (the statement checker's).
+//! [`Operations`] (it only picks the opcodes); it still picks the operation of the other
+//! standard functions from their arguments' recorded types. No rule is evaluated twice:
+//! besides the statement checker's, the operator and standard-function type rules
+//! (`sema::ops`, `sema::stdfuncs`), the implicit conversion rules
+//! (`types::implicit_conversion` and those of references) and the recursion rule
+//! (`sema::body`), every rule of the expression walk (argument counts, placement and types,
+//! unconnected in-outs, in-out arguments and output targets, member access, literal and
+//! index ranges, partial accesses, the reference rules and escapes) runs in the checking
+//! pass only, behind `Gen::check_only` or in a `check_*` method only that pass calls. What
+//! is not separate yet is the walk itself: those checks live beside the emission code in
+//! `codegen/`, and the checking pass is the emitter's walk with emission switched off.
 
 use std::collections::HashMap;
 

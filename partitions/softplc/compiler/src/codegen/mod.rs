@@ -2,7 +2,7 @@
 //! checking pass ([`crate::typed::check`]) runs its expression walk with emission off
 //! (`check_only`), which is where the expressions' rules (types, names, l-values) are
 //! checked; a body's statements are checked by the statement checker
-//! ([`crate::sema::stmt`]); emission reads the checker's records ([`crate::typed::Checked`]).
+//! (`sema::stmt`); emission reads the checker's records ([`crate::typed::Checked`]).
 //!
 //! Every POU gets one POU-table entry with `arg_cells = ret_cells = 0`: parameters are passed
 //! through the callee's frame (FB instance or the function's static frame). Expression values
