@@ -533,8 +533,6 @@ impl Gen<'_> {
         }
     }
 
-    /// Pushes `[dst_addr src_addr]` for a string assignment or block copy, whichever of the
-    /// two has its base address already on the stack.
     /// Reports what is wrong with `target` (the place `dst`) as the target of the output
     /// `src` (the checking pass asks); `false` when the output cannot be copied there at all.
     fn check_output_target(&mut self, src: &Place, dst: &Place, target: &Expr) -> bool {
@@ -544,13 +542,7 @@ impl Gen<'_> {
             self.error(codes::OUTPUT_TARGET, target.span, "output of an FB array element into an array element with a computed index is not supported; use a temporary variable");
             return false;
         }
-        if !dst.writable {
-            self.error(
-                codes::ASSIGN_TO_READ_ONLY,
-                target.span,
-                "output target is not writable",
-            );
-        }
+        self.check_output_writable(dst, target);
         if matches!(dst.ty, Type::String(_) | Type::WString(_))
             && src.ty.is_wstring() != dst.ty.is_wstring()
             && !src.ty.is_error()
@@ -565,6 +557,19 @@ impl Gen<'_> {
         true
     }
 
+    /// Reports an output's target `target` (the place `dst`) that cannot be written.
+    pub(super) fn check_output_writable(&mut self, dst: &Place, target: &Expr) {
+        if !dst.writable {
+            self.error(
+                codes::ASSIGN_TO_READ_ONLY,
+                target.span,
+                "output target is not writable",
+            );
+        }
+    }
+
+    /// Pushes `[dst_addr src_addr]` for a string assignment or block copy, whichever of the
+    /// two has its base address already on the stack.
     fn aggregate_operands(&mut self, src: &Place, dst: &Place) {
         if matches!(src.loc, Loc::Ind(_)) {
             self.addr_of(src);

@@ -229,13 +229,7 @@ impl Gen<'_> {
             }
             return false;
         }
-        if !place.writable {
-            self.error(
-                codes::ASSIGN_TO_READ_ONLY,
-                target.span,
-                "output target is not writable",
-            );
-        }
+        self.check_output_writable(place, target);
         true
     }
 
