@@ -3,7 +3,6 @@
 
 use super::stdfuncs::*;
 use super::*;
-use crate::sema::ops::Operand;
 use crate::sema::stdfuncs::{self as rules, ConversionArgument};
 
 impl Gen<'_> {
@@ -268,13 +267,7 @@ impl Gen<'_> {
             self.surface(arg);
             return None;
         }
-        let operand = Operand {
-            ty: &at,
-            flexible: Self::is_flexible(arg),
-            string_literal: false,
-            real_literal: Self::has_real_literal(arg),
-        };
-        let Some(route) = rules::conversion_argument(from, operand) else {
+        let Some(route) = rules::conversion_argument(from, Self::operand(arg, &at)) else {
             let msg = format!(
                 "{} expects a {} argument, found {}",
                 id.text,

@@ -59,6 +59,17 @@ impl Gen<'_> {
         }
     }
 
+    /// The expression `e` of type `ty` as the rules of `sema` see an operand: its type and
+    /// the facts about its form they ask about.
+    pub(crate) fn operand<'t>(e: &Expr, ty: &'t Type) -> crate::sema::ops::Operand<'t> {
+        crate::sema::ops::Operand {
+            ty,
+            flexible: Self::is_flexible(e),
+            string_literal: matches!(e.kind, ExprKind::Str(_)),
+            real_literal: Self::has_real_literal(e),
+        }
+    }
+
     pub(crate) fn has_real_literal(e: &Expr) -> bool {
         match &e.kind {
             ExprKind::Real(_) => true,

@@ -46,13 +46,7 @@ impl Gen<'_> {
                 _ => self.no_operation(span),
             };
         }
-        let operand = |e: &Expr, ty| ops::Operand {
-            ty,
-            flexible: Self::is_flexible(e),
-            string_literal: matches!(e.kind, ExprKind::Str(_)),
-            real_literal: Self::has_real_literal(e),
-        };
-        let decided = ops::binary_rule(op, operand(a, ta), operand(b, tb));
+        let decided = ops::binary_rule(op, Self::operand(a, ta), Self::operand(b, tb));
         match self.record_operation(a, decided.map(Operation::Binary), op.symbol(), span) {
             Some(Operation::Binary(rule)) => Some(rule),
             _ => None,

@@ -11,7 +11,7 @@ use plc_vm::isa::{Builtin, MemType, Opcode, RoundMode};
 use crate::ast::*;
 use crate::codegen::{Gen, Place};
 use crate::diagnostics::Span;
-use crate::sema::{ops, stdfuncs as rules};
+use crate::sema::stdfuncs as rules;
 use crate::types::*;
 
 /// A date and time function: the typed form of an operator (`ADD_TOD_TIME` is TOD + TIME;
@@ -458,13 +458,7 @@ impl Gen<'_> {
             self.surface(arg);
             return None;
         }
-        let operand = ops::Operand {
-            ty: &t,
-            flexible: Self::is_flexible(arg),
-            string_literal: false,
-            real_literal: Self::has_real_literal(arg),
-        };
-        let Some(source) = rules::conversion_source(operand) else {
+        let Some(source) = rules::conversion_source(Self::operand(arg, &t)) else {
             self.bad_inferred_arg(arg, &t, "an elementary value");
             return None;
         };
@@ -582,11 +576,7 @@ impl Gen<'_> {
             return false;
         }
         for ((e, t), want) in c.exprs.iter().zip(&types).zip(want) {
-            let operand = ops::Operand {
-                flexible: Self::is_flexible(e),
-                ..ops::Operand::plain(t)
-            };
-            if !rules::time_operand_fits(want, operand) {
+            if !rules::time_operand_fits(want, Self::operand(e, t)) {
                 let what = if want == Elem::LReal {
                     "a number".to_string()
                 } else {
@@ -1175,14 +1165,8 @@ impl Gen<'_> {
         }
         let t = self.infer(e);
         let target = if self.check_only {
-            let arg = ops::Operand {
-                ty: &t,
-                flexible: Self::is_flexible(e),
-                string_literal: false,
-                real_literal: false,
-            };
             let real_context = c.ctx.as_ref().and_then(|c| c.elem()) == Some(Elem::Real);
-            let Some(target) = rules::real_function_type(arg, real_context) else {
+            let Some(target) = rules::real_function_type(Self::operand(e, &t), real_context) else {
                 self.bad_inferred_arg(e, &t, "a number");
                 return None;
             };
