@@ -3,6 +3,7 @@
 
 use super::stdfuncs::*;
 use super::*;
+use crate::sema::expr::operand;
 use crate::sema::stdfuncs::{self as rules, ConversionArgument};
 
 impl Gen<'_> {
@@ -267,7 +268,7 @@ impl Gen<'_> {
             self.surface(arg);
             return None;
         }
-        let Some(route) = rules::conversion_argument(from, Self::operand(arg, &at)) else {
+        let Some(route) = rules::conversion_argument(from, operand(arg, &at)) else {
             let msg = format!(
                 "{} expects a {} argument, found {}",
                 id.text,

@@ -1,89 +1,25 @@
 //! Expressions: inference, implicit conversions, literals and unary operators.
 
 use super::*;
-use crate::sema::ops::UnaryRule;
+use crate::sema::expr::{
+    char_literal_type, int_literal_type, real_literal_type, string_literal_type,
+    typed_literal_value, wstring_literal_type,
+};
+use crate::sema::ops::{Operation, UnaryRule};
 
 impl Gen<'_> {
     /// Type of an expression without emitting code or reporting errors. The checking pass
-    /// infers it (a walk of the expression with nothing emitted nor reported) and records
-    /// it; the emission pass only reads the record: a missing one is an internal error.
+    /// infers it ([`crate::sema::expr::infer`]) and records it; the emission pass only reads
+    /// the record: a missing one is an internal error.
     pub(crate) fn infer(&mut self, e: &Expr) -> Type {
         if let Some(t) = self.types.of(e) {
             return t.clone();
         }
-        if !self.check_only {
-            self.missing_record(e.span, "recorded no type for this expression");
-            return Type::Error;
+        if self.check_only {
+            return crate::sema::expr::infer(self, e);
         }
-        let saved = self.dry;
-        self.dry = true;
-        let t = self.expr(e, None);
-        self.dry = saved;
-        self.types.record(e, t.clone());
-        t
-    }
-
-    /// Whether `e` is built only from untyped numeric literals (it adapts to its context).
-    pub(crate) fn is_flexible(e: &Expr) -> bool {
-        match &e.kind {
-            ExprKind::Int(_) | ExprKind::Real(_) => true,
-            // TRUNC and SIZEOF give any integer type (IEC: ANY_INT), whatever their argument.
-            ExprKind::Call { callee, .. } if matches!(&callee.kind, ExprKind::Name(n) if n.name == "TRUNC" || n.name == "SIZEOF") => {
-                true
-            }
-            // Numeric standard functions of literals are as untyped as the literals.
-            ExprKind::Call { callee, args } => match &callee.kind {
-                ExprKind::Name(n) => {
-                    const GENERIC: &[&str] = &[
-                        "ABS", "SQRT", "LN", "LOG", "EXP", "SIN", "COS", "TAN", "ASIN", "ACOS",
-                        "ATAN", "EXPT", "MAX", "MIN", "LIMIT",
-                    ];
-                    GENERIC.contains(&n.name.as_str())
-                        && !args.is_empty()
-                        && args
-                            .iter()
-                            .all(|a| !a.output && Self::is_flexible(&a.value))
-                }
-                _ => false,
-            },
-            ExprKind::Unary(UnOp::Neg, x) => Self::is_flexible(x),
-            ExprKind::Binary(op, a, b)
-                if !matches!(
-                    op,
-                    BinOp::Eq | BinOp::Ne | BinOp::Lt | BinOp::Le | BinOp::Gt | BinOp::Ge
-                ) =>
-            {
-                Self::is_flexible(a) && Self::is_flexible(b)
-            }
-            _ => false,
-        }
-    }
-
-    /// The expression `e` of type `ty` as the rules of `sema` see an operand: its type and
-    /// the facts about its form they ask about.
-    pub(crate) fn operand<'t>(e: &Expr, ty: &'t Type) -> crate::sema::ops::Operand<'t> {
-        crate::sema::ops::Operand {
-            ty,
-            flexible: Self::is_flexible(e),
-            string_literal: matches!(e.kind, ExprKind::Str(_)),
-            real_literal: Self::has_real_literal(e),
-        }
-    }
-
-    pub(crate) fn has_real_literal(e: &Expr) -> bool {
-        match &e.kind {
-            ExprKind::Real(_) => true,
-            ExprKind::Call { callee, .. } if matches!(&callee.kind, ExprKind::Name(n) if n.name == "TRUNC" || n.name == "SIZEOF") => {
-                false
-            }
-            ExprKind::Call { callee, args } => {
-                matches!(&callee.kind, ExprKind::Name(n) if !["ABS", "MAX", "MIN", "LIMIT"].contains(&n.name.as_str()))
-                    || args.iter().any(|a| Self::has_real_literal(&a.value))
-            }
-            ExprKind::Unary(_, x) => Self::has_real_literal(x),
-            ExprKind::Binary(_, a, b) => Self::has_real_literal(a) || Self::has_real_literal(b),
-            _ => false,
-        }
+        self.missing_record(e.span, "recorded no type for this expression");
+        Type::Error
     }
 
     /// Compiles `e` and converts the result to `to` (implicit conversions only).
@@ -345,21 +281,25 @@ impl Gen<'_> {
         }
     }
 
-    /// Compiles an expression; `expected` guides the typing of untyped literals.
+    /// Compiles an expression; `expected` guides the typing of untyped literals (as the
+    /// checker typed them). In the checking pass, the expression checker walks it
+    /// ([`crate::sema::expr`]).
     pub(crate) fn expr(&mut self, e: &Expr, expected: Option<&Type>) -> Type {
+        if self.check_only {
+            return crate::sema::expr::check(self, e, expected);
+        }
         match &e.kind {
             ExprKind::Error => Type::Error,
             ExprKind::Int(v) => self.int_literal(*v as i128, expected, e.span),
             ExprKind::Real(r) => {
-                if expected.and_then(|t| t.elem()) == Some(Elem::Real) {
-                    let r = *r as f32;
-                    self.emit(|b| b.push_f32(r));
-                    Type::REAL
+                let elem = real_literal_type(expected);
+                let r = *r;
+                if elem == Elem::Real {
+                    self.emit(|b| b.push_f32(r as f32));
                 } else {
-                    let r = *r;
                     self.emit(|b| b.push_f64(r));
-                    Type::LREAL
                 }
+                Type::Elem(elem)
             }
             ExprKind::Bool(v) => {
                 self.push_int(*v as i64);
@@ -374,39 +314,29 @@ impl Gen<'_> {
                 Type::Elem(*elem)
             }
             // A one-character string literal where a CHAR or WCHAR is expected.
-            ExprKind::Str(s)
-                if expected
-                    .and_then(|t| t.elem())
-                    .is_some_and(|e| e.is_char() && !matches!(expected, Some(Type::Enum(_))))
-                    && crate::sema::single_char(s).is_some() =>
-            {
-                let elem = expected.and_then(|t| t.elem()).unwrap_or(Elem::Char);
+            ExprKind::Str(s) if let Some(elem) = char_literal_type(s, expected) => {
                 let code = crate::sema::single_char(s).unwrap_or(0);
-                if self.check_only && code > elem.int_range().1 {
-                    let msg = format!("character '{s}' does not fit type {elem}");
-                    self.error(codes::VALUE_OUT_OF_RANGE, e.span, msg);
-                }
                 self.push_int(code as i64);
                 Type::Elem(elem)
             }
             ExprKind::WStr(s) => {
                 let a = self.wstring_literal(s);
                 self.emit(|b| b.push_u32(a));
-                Type::WString(s.encode_utf16().count().max(1) as u32)
+                wstring_literal_type(s)
             }
             // A STRING literal where a WSTRING is expected is that WSTRING.
             ExprKind::Str(s) if matches!(expected, Some(Type::WString(_))) => {
                 let a = self.wstring_literal(s);
                 self.emit(|b| b.push_u32(a));
-                Type::WString(s.encode_utf16().count().max(1) as u32)
+                wstring_literal_type(s)
             }
             ExprKind::Str(s) => {
                 let a = self.string_literal(s);
                 self.emit(|b| b.push_u32(a));
-                Type::String(s.len().max(1) as u32)
+                string_literal_type(s)
             }
             ExprKind::Typed(ty, inner) => self.typed_literal(ty, inner, e.span),
-            ExprKind::Name(n) => match self.bare_name(n, expected) {
+            ExprKind::Name(n) => match self.bare_name(n) {
                 Some(Bare::Property { class, getter }) => self.own_property_read(class, getter, e),
                 Some(Bare::EnumValue { ty, value }) => {
                     self.push_int(value);
@@ -432,139 +362,70 @@ impl Gen<'_> {
                 self.push_int(0);
                 Type::Null
             }
+            ExprKind::Unary(op, x) => self.unary(*op, x, expected, e.span),
+            ExprKind::Binary(op, a, b) => self.binary(*op, a, b, expected, e.span),
+            ExprKind::This
+            | ExprKind::Super
+            | ExprKind::Member(..)
+            | ExprKind::Index(..)
+            | ExprKind::Deref(..)
+            | ExprKind::Bits { .. }
+            | ExprKind::Call { .. } => self.access_or_call(e, expected),
+        }
+    }
+
+    /// Compiles THIS, SUPER, an access (a member, an element, a dereference, a partial
+    /// access) or a call. The checking pass checks them here too: the expression checker
+    /// ([`crate::sema::expr`]) leaves them to this walk in its checking mode.
+    pub(crate) fn access_or_call(&mut self, e: &Expr, expected: Option<&Type>) -> Type {
+        match &e.kind {
             ExprKind::This => self.this_expr(false, e.span),
             ExprKind::Super => self.this_expr(true, e.span),
             ExprKind::Member(..) if let Some(t) = self.property_read(e) => t,
-            ExprKind::Member(..)
-            | ExprKind::Index(..)
-            | ExprKind::Deref(..)
-            | ExprKind::Bits { .. } => match self.place(e) {
+            ExprKind::Call { callee, args } => self.call(callee, args, expected, e.span),
+            _ => match self.place(e) {
                 Some(p) => {
                     self.load(&p);
                     p.ty
                 }
                 None => Type::Error,
             },
-            ExprKind::Call { callee, args } => self.call(callee, args, expected, e.span),
-            ExprKind::Unary(op, x) => self.unary(*op, x, expected, e.span),
-            ExprKind::Binary(op, a, b) => self.binary(*op, a, b, expected, e.span),
         }
     }
 
-    /// What bare name `n` denotes. The checking pass decides it and records it ([`Bare`]; a
-    /// walk for inference records only what no real walk has, as the expected type may
-    /// differ); emission reads the record.
-    fn bare_name(&mut self, n: &Ident, expected: Option<&Type>) -> Option<Bare> {
-        if !self.check_only {
-            let bare = self.bare_names.of(self.cur, n).cloned();
-            if bare.is_none() {
-                self.missing_record(n.span, "resolved no meaning for this name");
-            }
-            return bare;
+    /// What bare name `n` denotes, as the checker recorded it.
+    fn bare_name(&mut self, n: &Ident) -> Option<Bare> {
+        let bare = self.bare_names.of(self.cur, n).cloned();
+        if bare.is_none() {
+            self.missing_record(n.span, "resolved no meaning for this name");
         }
-        let bare = self.resolve_bare(n, expected);
-        if !self.dry || self.bare_names.of(self.cur, n).is_none() {
-            self.bare_names.record(self.cur, n, bare.clone());
-        }
-        Some(bare)
+        bare
     }
 
-    /// What bare name `n` denotes in the current POU, `expected` being the type its context
-    /// expects.
-    fn resolve_bare(&self, n: &Ident, expected: Option<&Type>) -> Bare {
-        if self.is_visible_var(&n.name) {
-            return Bare::Variable;
+    /// Pushes the integer literal `v` in the type it takes where `expected` is wanted
+    /// ([`int_literal_type`]).
+    fn int_literal(&mut self, v: i128, expected: Option<&Type>, span: Span) -> Type {
+        let Ok(elem) = int_literal_type(v, expected) else {
+            self.missing_record(span, "passed an integer literal that does not fit its type");
+            return Type::Error;
+        };
+        match elem {
+            Elem::Real => self.emit(|b| b.push_f32(v as f32)),
+            Elem::LReal => self.emit(|b| b.push_f64(v as f64)),
+            _ => self.push_int(v as i64),
         }
-        if let Some(property) = self.own_property(n) {
-            return property;
-        }
-        if let Some(Type::Enum(ei)) = expected
-            && let Some((_, v)) = self.prog.enums[*ei]
-                .values
-                .iter()
-                .find(|(vn, _)| *vn == n.name)
-        {
-            return Bare::EnumValue { ty: *ei, value: *v };
-        }
-        if let Some((ty, value)) = self.prog.enum_value(&n.name) {
-            return Bare::EnumValue { ty, value };
-        }
-        if let Some(t) = Trap::ALL.iter().find(|t| t.name() == n.name) {
-            return Bare::Exception(t.code() as i64);
-        }
-        Bare::Variable
+        Type::Elem(elem)
     }
 
-    /// Pushes the integer literal `v` in the type `expected` asks for (BOOL for 0 and 1, a
-    /// REAL, an integer it must fit), else in DINT, LINT or ULINT by its size; the checking
-    /// pass reports a literal that does not fit.
-    pub(crate) fn int_literal(&mut self, v: i128, expected: Option<&Type>, span: Span) -> Type {
-        let exp_elem = expected.and_then(|t| match t {
-            Type::Enum(_) | Type::Exception => None,
-            t => t.elem(),
-        });
-        match exp_elem {
-            // IEC boolean literals include 0 and 1.
-            Some(Elem::Bool) if v == 0 || v == 1 => {
-                self.push_int(v as i64);
-                Type::BOOL
-            }
-            Some(e) if e.is_real() => {
-                if e == Elem::Real {
-                    self.emit(|b| b.push_f32(v as f32));
-                } else {
-                    self.emit(|b| b.push_f64(v as f64));
-                }
-                Type::Elem(e)
-            }
-            Some(e) if e.is_integral() => {
-                let (lo, hi) = e.int_range();
-                if self.check_only && (v < lo || v > hi) {
-                    let msg = format!("constant {v} does not fit type {e}");
-                    self.error(codes::VALUE_OUT_OF_RANGE, span, msg);
-                    return Type::Error;
-                }
-                self.push_int(v as i64);
-                Type::Elem(e)
-            }
-            _ => {
-                if self.check_only && (v > u64::MAX as i128 || v < i64::MIN as i128) {
-                    self.error(codes::INTEGER_TOO_LARGE, span, "integer constant too large");
-                    return Type::Error;
-                }
-                self.push_int(v as i64);
-                if v >= i32::MIN as i128 && v <= i32::MAX as i128 {
-                    Type::DINT
-                } else if v <= i64::MAX as i128 {
-                    Type::LINT
-                } else {
-                    Type::Elem(Elem::ULInt)
-                }
-            }
-        }
-    }
-
-    pub(super) fn typed_literal(&mut self, ty: &Ident, inner: &Expr, span: Span) -> Type {
+    /// Pushes the typed literal `ty#inner`: an elementary value, a `STRING#` literal, or the
+    /// enumeration value the checker recorded.
+    fn typed_literal(&mut self, ty: &Ident, inner: &Expr, span: Span) -> Type {
         if let Some(elem) = Elem::from_name(&ty.name) {
             let t = Type::Elem(elem);
-            let v = match const_eval(self.prog, &(), inner) {
-                Some(v) => v,
-                None => {
-                    self.error(
-                        codes::MALFORMED_LITERAL,
-                        inner.span,
-                        format!("invalid {} literal", elem),
-                    );
-                    return Type::Error;
-                }
+            let Some(v) = typed_literal_value(self.prog, elem, inner) else {
+                self.missing_record(inner.span, "passed an invalid typed literal");
+                return Type::Error;
             };
-            let v = match (v, elem) {
-                (ConstVal::Bool(b), e) if e != Elem::Bool => ConstVal::Int(b as i128),
-                (v, _) => v,
-            };
-            if self.dry {
-                return t;
-            }
             return match self.const_cell(&v, &t, elem, span) {
                 Some(cell) => {
                     self.emit(|b| b.push_i64(cell as i64));
@@ -576,52 +437,19 @@ impl Gen<'_> {
         if ty.name == "STRING" {
             return self.expr(inner, None);
         }
-        // `Enum#value`: the checking pass resolves it and records it ([`Bare`]); emission
-        // reads the record.
-        if !self.check_only {
-            if let ExprKind::Name(n) = &inner.kind
-                && let Some(Bare::EnumValue { ty, value }) = self.bare_names.of(self.cur, n)
-            {
-                let (ty, value) = (*ty, *value);
-                self.push_int(value);
-                return Type::Enum(ty);
-            }
-            self.missing_record(inner.span, "resolved no enumeration value for this literal");
-            return Type::Error;
-        }
-        if let (Some((Type::Enum(ei), _)), ExprKind::Name(n)) =
-            (self.prog.aliases.get(&ty.name).cloned(), &inner.kind)
+        if let ExprKind::Name(n) = &inner.kind
+            && let Some(Bare::EnumValue { ty, value }) = self.bare_names.of(self.cur, n)
         {
-            if let Some((_, v)) = self.prog.enums[ei]
-                .values
-                .iter()
-                .find(|(vn, _)| *vn == n.name)
-            {
-                let value = *v;
-                self.bare_names
-                    .record(self.cur, n, Bare::EnumValue { ty: ei, value });
-                self.push_int(value);
-                return Type::Enum(ei);
-            }
-            let msg = format!("`{}` is not a value of {}", n.text, ty.text);
-            self.error(codes::UNKNOWN_ENUMERATION_VALUE, n.span, msg);
-            return Type::Error;
+            let (ty, value) = (*ty, *value);
+            self.push_int(value);
+            return Type::Enum(ty);
         }
-        self.error(
-            codes::UNKNOWN_TYPE,
-            ty.span,
-            format!("unknown type `{}` in typed literal", ty.text),
-        );
+        self.missing_record(inner.span, "resolved no enumeration value for this literal");
         Type::Error
     }
 
-    pub(super) fn unary(
-        &mut self,
-        op: UnOp,
-        x: &Expr,
-        expected: Option<&Type>,
-        span: Span,
-    ) -> Type {
+    /// Emits `op x` as the checker decided it ([`crate::typed::Operations`]).
+    fn unary(&mut self, op: UnOp, x: &Expr, expected: Option<&Type>, span: Span) -> Type {
         // Negative literals are folded so that e.g. INT's -32768 is accepted.
         if op == UnOp::Neg {
             if let ExprKind::Int(v) = x.kind {
@@ -637,114 +465,25 @@ impl Gen<'_> {
                 return t;
             }
         }
-        let t = self.expr(x, expected);
-        if t.is_error() {
-            return Type::Error;
-        }
-        match self.unary_rule(op, x, &t, span) {
-            Some(UnaryRule::Same(e)) => {
-                match (op, e) {
-                    (UnOp::Neg, Elem::Real) => self.op(Opcode::NegF32),
-                    (UnOp::Neg, Elem::LReal) => self.op(Opcode::NegF64),
-                    (UnOp::Neg, e) => {
-                        self.op(Opcode::Neg);
-                        self.wrap(e);
-                    }
-                    (UnOp::Not, Elem::Bool) => self.op(Opcode::NotBool),
-                    (UnOp::Not, e) => {
-                        self.op(Opcode::Not);
-                        self.wrap(e);
-                    }
-                }
-                Type::Elem(e)
-            }
-            Some(UnaryRule::NegateWidened(signed)) => {
+        self.expr(x, expected);
+        let rule = match self.operations.of(x) {
+            Some(Operation::Unary(rule)) => *rule,
+            _ => return self.no_operation(span),
+        };
+        match (op, rule) {
+            (UnOp::Neg, UnaryRule::Same(Elem::Real)) => self.op(Opcode::NegF32),
+            (UnOp::Neg, UnaryRule::Same(Elem::LReal)) => self.op(Opcode::NegF64),
+            (UnOp::Neg, UnaryRule::Same(e)) => {
                 self.op(Opcode::Neg);
-                Type::Elem(signed)
+                self.wrap(e);
             }
-            None => Type::Error,
+            (UnOp::Not, UnaryRule::Same(Elem::Bool)) => self.op(Opcode::NotBool),
+            (UnOp::Not, UnaryRule::Same(e)) => {
+                self.op(Opcode::Not);
+                self.wrap(e);
+            }
+            (_, UnaryRule::NegateWidened(_)) => self.op(Opcode::Neg),
         }
-    }
-
-    /// Type both operands are brought to.
-    pub(super) fn operand_type(
-        &mut self,
-        a: &Expr,
-        b: &Expr,
-        expected: Option<&Type>,
-    ) -> (Type, Type) {
-        let fa = Self::is_flexible(a);
-        let fb = Self::is_flexible(b);
-        let ta = if fa { None } else { Some(self.infer(a)) };
-        let tb = if fb { None } else { Some(self.infer(b)) };
-        // Only a plain literal: arithmetic of literals keeps wrapping in the other operand's
-        // type as it always did.
-        let int_value = |e: &Expr| match &e.kind {
-            ExprKind::Int(v) => Some(*v as i128),
-            ExprKind::Unary(UnOp::Neg, x) => match x.kind {
-                ExprKind::Int(v) => Some(-(v as i128)),
-                _ => None,
-            },
-            _ => None,
-        };
-        let (va, vb) = (int_value(a), int_value(b));
-        // An integer literal takes the other operand's type, or a wider one when it does not
-        // fit it (`int_var * 60000` is a DINT product, as the literal is a DINT).
-        let flex_type = |other: &Type, e: &Expr, value: Option<i128>| -> Type {
-            if Self::has_real_literal(e) {
-                return match other.elem() {
-                    Some(x) if x.is_real() => other.clone(),
-                    _ => Type::LREAL,
-                };
-            }
-            match (other, value) {
-                (Type::Elem(x), Some(v)) if x.is_integral() => {
-                    let (lo, hi) = x.int_range();
-                    if lo <= v && v <= hi {
-                        return other.clone();
-                    }
-                    let literal = if i32::try_from(v).is_ok() {
-                        Elem::DInt
-                    } else {
-                        Elem::LInt
-                    };
-                    match common_numeric(*x, literal) {
-                        Some(c) if c.int_range().0 <= v && v <= c.int_range().1 => Type::Elem(c),
-                        _ => other.clone(),
-                    }
-                }
-                _ => other.clone(),
-            }
-        };
-        match (ta, tb) {
-            (Some(x), Some(y)) => (x, y),
-            (Some(x), None) => {
-                let y = flex_type(&x, b, vb);
-                (x, y)
-            }
-            (None, Some(y)) => {
-                let x = flex_type(&y, a, va);
-                (x, y)
-            }
-            (None, None) => {
-                let num = expected
-                    .and_then(|t| t.elem())
-                    .filter(|e| e.is_numeric() && !matches!(expected, Some(Type::Enum(_))));
-                let any_real = Self::has_real_literal(a) || Self::has_real_literal(b);
-                // Integer literals stay integers (5 / 2 = 2 even when assigned to a REAL);
-                // real literals take a REAL context's precision.
-                let t = match num {
-                    Some(e) if e.is_real() == any_real => Type::Elem(e),
-                    _ => {
-                        if Self::has_real_literal(a) || Self::has_real_literal(b) {
-                            Type::LREAL
-                        } else {
-                            Type::DINT
-                        }
-                    }
-                };
-                (t.clone(), t)
-            }
-        }
+        Type::Elem(rule.result())
     }
 }

@@ -34,7 +34,7 @@ use crate::codes::{self, Code};
 use std::collections::HashMap;
 
 use plc_vm::image::{ImageBuilder, Label, PouId};
-use plc_vm::isa::{Builtin, MemType, Opcode, RoundMode, Trap};
+use plc_vm::isa::{Builtin, MemType, Opcode, RoundMode};
 
 use crate::ast::*;
 use crate::diagnostics::{Diagnostics, SourceMap, Span};

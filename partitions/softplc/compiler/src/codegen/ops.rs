@@ -1,11 +1,15 @@
-//! Operators: the checking pass decides what each does by the rules of [`crate::sema::ops`]
-//! and records it; emission reads the record and emits the binary operations here
-//! (arithmetic, comparisons, bit logic, date/time arithmetic; the unary ones in `expr.rs`).
+//! Operators: the expression checker ([`crate::sema::expr`]) decides what each does by the
+//! rules of [`crate::sema::ops`] and records it; emission reads the record and emits the
+//! binary operations here (arithmetic, comparisons, bit logic, date/time arithmetic; the
+//! unary ones in `expr.rs`).
 
 use super::*;
-use crate::sema::ops::{self, BinaryRule, Operation, OperatorError, UnaryRule};
+use crate::sema::expr::{operand_context, operand_types};
+use crate::sema::ops::{BinaryRule, Operation};
 
 impl Gen<'_> {
+    /// Emits `a op b` as the checker decided it ([`crate::typed::Operations`]); in the
+    /// checking pass, the expression checker checks it ([`crate::sema::expr::binary`]).
     pub(crate) fn binary(
         &mut self,
         op: BinOp,
@@ -14,114 +18,25 @@ impl Gen<'_> {
         expected: Option<&Type>,
         span: Span,
     ) -> Type {
+        if self.check_only {
+            return crate::sema::expr::binary(self, op, a, b, expected, span);
+        }
         if self.is_pointer_operation(a, b) {
             return self.pointer_binary(op, a, b, expected, span);
         }
-        let (ta, tb) = self.operand_type(a, b, expected);
-        if ta.is_error() || tb.is_error() {
-            self.expr(a, None);
-            self.expr(b, None);
-            return Type::Error;
-        }
-        match self.binary_rule(op, (a, &ta), (b, &tb), span) {
-            Some(rule) => self.emit_binary(op, &rule, (a, &ta), (b, &tb)),
-            None => Type::Error,
-        }
-    }
-
-    /// What `a op b` does: the checking pass decides it ([`ops::binary_rule`], reporting a
-    /// refusal) and records it ([`crate::typed::Operations`]; a walk for inference records
-    /// only what no real walk has, as the expected type may differ); emission reads the
-    /// record.
-    fn binary_rule(
-        &mut self,
-        op: BinOp,
-        (a, ta): (&Expr, &Type),
-        (b, tb): (&Expr, &Type),
-        span: Span,
-    ) -> Option<BinaryRule> {
-        if !self.check_only {
-            return match self.operations.of(a) {
-                Some(Operation::Binary(rule)) => Some(rule.clone()),
-                _ => self.no_operation(span),
-            };
-        }
-        let decided = ops::binary_rule(op, Self::operand(a, ta), Self::operand(b, tb));
-        match self.record_operation(a, decided.map(Operation::Binary), op.symbol(), span) {
-            Some(Operation::Binary(rule)) => Some(rule),
-            _ => None,
-        }
-    }
-
-    /// What `op x` does (`t`: the type of `x`, not the error type), as [`Gen::binary_rule`]
-    /// decides and records it.
-    pub(super) fn unary_rule(
-        &mut self,
-        op: UnOp,
-        x: &Expr,
-        t: &Type,
-        span: Span,
-    ) -> Option<UnaryRule> {
-        let symbol = if op == UnOp::Neg { "-" } else { "NOT" };
-        if !self.check_only {
-            return match self.operations.of(x) {
-                Some(Operation::Unary(rule)) => Some(*rule),
-                _ => self.no_operation(span),
-            };
-        }
-        let decided = ops::unary_rule(op, t).map(Operation::Unary);
-        match self.record_operation(x, decided, symbol, span) {
-            Some(Operation::Unary(rule)) => Some(rule),
-            _ => None,
-        }
+        let (ta, tb) = operand_types(self, a, b, expected);
+        let rule = match self.operations.of(a) {
+            Some(Operation::Binary(rule)) => rule.clone(),
+            _ => return self.no_operation(span),
+        };
+        self.emit_binary(op, &rule, (a, &ta), (b, &tb))
     }
 
     /// Reports that emission found no record of the operator at `span` (of its kind): the
     /// checker missed it.
-    fn no_operation<T>(&mut self, span: Span) -> Option<T> {
+    pub(super) fn no_operation(&mut self, span: Span) -> Type {
         self.missing_record(span, "decided no operation for this operator");
-        None
-    }
-
-    /// Records the checker's decision on the operation whose first operand is `first`, or
-    /// reports why the operator `symbol` is refused.
-    fn record_operation(
-        &mut self,
-        first: &Expr,
-        decided: Result<Operation, OperatorError>,
-        symbol: &str,
-        span: Span,
-    ) -> Option<Operation> {
-        match decided {
-            Ok(operation) => {
-                if !self.dry || self.operations.of(first).is_none() {
-                    self.operations.record(first, operation.clone());
-                }
-                Some(operation)
-            }
-            Err(OperatorError::CharacterIsNoNumber) => {
-                self.error(
-                    codes::CHARACTER_IS_NO_NUMBER,
-                    span,
-                    "a character is no number: compare it with a character (CHAR#'a') or convert it (CHAR_TO_BYTE)",
-                );
-                None
-            }
-            Err(OperatorError::Types { a, b, hint }) => {
-                let msg = format!(
-                    "operator {symbol} cannot be applied to {} and {}{hint}",
-                    self.tname(&a),
-                    self.tname(&b)
-                );
-                self.error(codes::OPERATOR_TYPES, span, msg);
-                None
-            }
-            Err(OperatorError::Operand(t)) => {
-                let msg = format!("operator {symbol} cannot be applied to {}", self.tname(&t));
-                self.error(codes::OPERATOR_TYPES, span, msg);
-                None
-            }
-        }
+        Type::Error
     }
 
     /// Emits `a op b` as `rule` says; returns its type.
@@ -267,7 +182,7 @@ impl Gen<'_> {
     /// Compiles `e` (whose type was inferred as `from`) and converts to `to` without the
     /// implicit-conversion restriction (used for operands already checked by the caller).
     pub(crate) fn value_to_any(&mut self, e: &Expr, from: &Type, to: &Type) {
-        let t = self.expr(e, Some(if Self::is_flexible(e) { to } else { from }));
+        let t = self.expr(e, Some(operand_context(e, from, to)));
         if let (Some(f), Some(t2)) = (t.elem(), to.elem()) {
             self.convert(f, t2);
         }

@@ -31,6 +31,7 @@ use crate::ast::*;
 use crate::codegen::{Gen, Loc, Place};
 use crate::diagnostics::Span;
 use crate::sema::align_up;
+use crate::sema::expr::{has_real_literal, is_flexible};
 use crate::types::*;
 
 /// A variable whose address a program takes: what the object table must list.
@@ -461,7 +462,7 @@ impl Gen<'_> {
     /// The type of an operand of a reference operation; `None` for an untyped integer
     /// literal (it takes the other operand's part: an offset or an address).
     fn pointer_operand_type(&mut self, e: &Expr) -> Option<Type> {
-        if Self::is_flexible(e) && !Self::has_real_literal(e) {
+        if is_flexible(e) && !has_real_literal(e) {
             None
         } else {
             Some(self.infer(e))

@@ -11,6 +11,7 @@ use plc_vm::isa::{Builtin, MemType, Opcode, RoundMode};
 use crate::ast::*;
 use crate::codegen::{Gen, Place};
 use crate::diagnostics::Span;
+use crate::sema::expr::{has_real_literal, is_flexible, operand};
 use crate::sema::stdfuncs as rules;
 use crate::types::*;
 
@@ -244,7 +245,7 @@ impl Gen<'_> {
         };
         let mut ok = true;
         for e in c.exprs.iter().take(typed_count).skip(untyped) {
-            if Self::is_flexible(e) {
+            if is_flexible(e) {
                 continue;
             }
             let at = self.infer(e);
@@ -458,7 +459,7 @@ impl Gen<'_> {
             self.surface(arg);
             return None;
         }
-        let Some(source) = rules::conversion_source(Self::operand(arg, &t)) else {
+        let Some(source) = rules::conversion_source(operand(arg, &t)) else {
             self.bad_inferred_arg(arg, &t, "an elementary value");
             return None;
         };
@@ -576,7 +577,7 @@ impl Gen<'_> {
             return false;
         }
         for ((e, t), want) in c.exprs.iter().zip(&types).zip(want) {
-            if !rules::time_operand_fits(want, Self::operand(e, t)) {
+            if !rules::time_operand_fits(want, operand(e, t)) {
                 let what = if want == Elem::LReal {
                     "a number".to_string()
                 } else {
@@ -915,8 +916,7 @@ impl Gen<'_> {
                 let rt = match from {
                     Some(f) => {
                         let t = self.infer(c.exprs[0]);
-                        if !(t.elem().is_some_and(|e| implicit_ok(e, f))
-                            || Self::is_flexible(c.exprs[0]))
+                        if !(t.elem().is_some_and(|e| implicit_ok(e, f)) || is_flexible(c.exprs[0]))
                         {
                             return Some(self.bad_inferred_arg(c.exprs[0], &t, &format!("a {f}")));
                         }
@@ -1166,7 +1166,7 @@ impl Gen<'_> {
         let t = self.infer(e);
         let target = if self.check_only {
             let real_context = c.ctx.as_ref().and_then(|c| c.elem()) == Some(Elem::Real);
-            let Some(target) = rules::real_function_type(Self::operand(e, &t), real_context) else {
+            let Some(target) = rules::real_function_type(operand(e, &t), real_context) else {
                 self.bad_inferred_arg(e, &t, "a number");
                 return None;
             };
@@ -1236,7 +1236,7 @@ impl Gen<'_> {
     pub(super) fn common_of(&mut self, exprs: &[&Expr], ctx: Option<&Type>) -> Type {
         let mut acc: Option<Type> = None;
         for e in exprs {
-            if Self::is_flexible(e) {
+            if is_flexible(e) {
                 continue;
             }
             let t = self.infer(e);
@@ -1280,9 +1280,7 @@ impl Gen<'_> {
         match acc {
             Some(Type::Subrange(e, ..)) => Type::Elem(e),
             Some(t) => {
-                if exprs
-                    .iter()
-                    .any(|e| Self::is_flexible(e) && Self::has_real_literal(e))
+                if exprs.iter().any(|e| is_flexible(e) && has_real_literal(e))
                     && !t.elem().is_some_and(|x| x.is_real())
                 {
                     Type::LREAL
@@ -1292,11 +1290,11 @@ impl Gen<'_> {
             }
             None => {
                 if let Some(c) = ctx.filter(|c| {
-                    !exprs.iter().any(|e| Self::has_real_literal(e))
+                    !exprs.iter().any(|e| has_real_literal(e))
                         || c.elem().is_some_and(|x| x.is_real())
                 }) {
                     c.clone()
-                } else if exprs.iter().any(|e| Self::has_real_literal(e)) {
+                } else if exprs.iter().any(|e| has_real_literal(e)) {
                     Type::LREAL
                 } else {
                     Type::DINT

@@ -12,6 +12,7 @@
 
 pub mod body;
 mod config;
+pub(crate) mod expr;
 pub mod ops;
 pub mod stdfuncs;
 pub(crate) mod stmt;

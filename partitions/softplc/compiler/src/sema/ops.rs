@@ -50,6 +50,15 @@ pub enum UnaryRule {
     NegateWidened(Elem),
 }
 
+impl UnaryRule {
+    /// The type of the result.
+    pub fn result(self) -> Elem {
+        match self {
+            UnaryRule::Same(e) | UnaryRule::NegateWidened(e) => e,
+        }
+    }
+}
+
 /// What a binary operation does, as the checker decided it.
 #[derive(Debug, Clone, PartialEq)]
 pub enum BinaryRule {
@@ -76,6 +85,22 @@ pub enum BinaryRule {
         duration_first: bool,
         number: Type,
     },
+}
+
+impl BinaryRule {
+    /// The type of the result.
+    pub fn result(&self) -> Type {
+        match self {
+            BinaryRule::StringCompare { .. } | BinaryRule::Compare => Type::BOOL,
+            BinaryRule::NumericCompare(_) => Type::BOOL,
+            BinaryRule::Logic(t) | BinaryRule::IntegerPower(t) | BinaryRule::Arithmetic(t) => {
+                Type::Elem(*t)
+            }
+            BinaryRule::Temporal { result, .. } | BinaryRule::Scale { result, .. } => {
+                Type::Elem(*result)
+            }
+        }
+    }
 }
 
 /// Why an operation is refused.
