@@ -2,7 +2,7 @@
 
 use super::*;
 use crate::sema::expr::{
-    char_literal_type, int_literal_type, real_literal_type, string_literal_type,
+    char_literal_type, int_literal_type, real_literal_type, reference_binding, string_literal_type,
     typed_literal_value, wstring_literal_type,
 };
 use crate::sema::ops::{Operation, UnaryRule};
@@ -22,8 +22,12 @@ impl Gen<'_> {
         Type::Error
     }
 
-    /// Compiles `e` and converts the result to `to` (implicit conversions only).
+    /// Compiles `e` and converts the result to `to` (implicit conversions only); in the
+    /// checking pass, the expression checker checks it ([`crate::sema::expr::value_to`]).
     pub(crate) fn value_to(&mut self, e: &Expr, to: &Type) {
+        if self.check_only {
+            return crate::sema::expr::value_to(self, e, to);
+        }
         if to.is_pointer_like() && matches!(e.kind, ExprKind::Int(0)) {
             // The literal 0 is NULL.
             self.push_int(0);
@@ -36,17 +40,7 @@ impl Gen<'_> {
                 self.push_int(0);
                 return;
             }
-            let id = Ident {
-                name: "REF".into(),
-                text: "REF".into(),
-                span: e.span,
-            };
-            let args = [Arg {
-                name: None,
-                output: false,
-                value: e.clone(),
-                span: e.span,
-            }];
+            let (id, args) = reference_binding(e);
             let t = self.ref_function(&id, &args, Some(&as_ref), e.span);
             self.coerce(&t, &as_ref, e);
             return;
@@ -55,27 +49,21 @@ impl Gen<'_> {
         self.coerce(&t, to, e);
     }
 
-    /// Emits an implicit conversion from `from` to `to` ([`implicit_conversion`]), or
-    /// reports a type mismatch.
+    /// Emits the implicit conversion of `e` from `from` to `to` the checker decided
+    /// ([`crate::typed::Coercions`]); in the checking pass, the expression checker decides
+    /// it ([`crate::sema::expr::coerce`]).
     pub(crate) fn coerce(&mut self, from: &Type, to: &Type, e: &Expr) {
+        if self.check_only {
+            return crate::sema::expr::coerce(self, from, to, e);
+        }
         if from.is_error() || to.is_error() || from == to {
             return;
         }
-        let implicit = if self.check_only {
-            let Some(implicit) = self.implicit_conversion(from, to, e.span) else {
-                return;
-            };
-            if !self.dry || self.coercions.of(e).is_none() {
-                self.coercions.record(e, implicit);
-            }
-            implicit
-        } else {
-            match self.coercions.of(e) {
-                Some(implicit) => *implicit,
-                None => {
-                    return self
-                        .missing_record(e.span, "decided no implicit conversion for this value");
-                }
+        let implicit = match self.coercions.of(e) {
+            Some(implicit) => *implicit,
+            None => {
+                return self
+                    .missing_record(e.span, "decided no implicit conversion for this value");
             }
         };
         match implicit {
@@ -83,36 +71,6 @@ impl Gen<'_> {
             Implicit::Convert(f, t) => self.convert(f, t),
             Implicit::AddressToInteger => self.emit(|b| b.op_width(Opcode::Zext, 32)),
         }
-    }
-
-    /// What a value of type `from` at `span` takes where `to` is wanted, or `None` when it
-    /// cannot stand there (reported).
-    fn implicit_conversion(&mut self, from: &Type, to: &Type, span: Span) -> Option<Implicit> {
-        if let Some(decided) = self.pointer_coercion(from, to, span) {
-            return decided;
-        }
-        let (code, msg) = match implicit_conversion(from, to) {
-            Ok(implicit) => return Some(implicit),
-            // Between numbers an explicit conversion would do.
-            Err(NotImplicit::MayLose(f, t)) if f.is_numeric() && t.is_numeric() => {
-                let msg = format!("cannot convert {f} to {t} implicitly (use {f}_TO_{t})");
-                (codes::IMPLICIT_CONVERSION, msg)
-            }
-            Err(NotImplicit::MayLose(..)) => {
-                (codes::IMPLICIT_CONVERSION, self.mismatch_message(from, to))
-            }
-            Err(NotImplicit::Mismatch) => (codes::TYPE_MISMATCH, self.mismatch_message(from, to)),
-        };
-        self.error(code, span, msg);
-        None
-    }
-
-    fn mismatch_message(&self, from: &Type, to: &Type) -> String {
-        format!(
-            "type mismatch: expected {}, found {}",
-            self.tname(to),
-            self.tname(from)
-        )
     }
 
     /// Emits the conversion of an elementary value (explicit conversions use this too).

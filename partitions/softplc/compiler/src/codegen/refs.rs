@@ -31,7 +31,7 @@ use crate::ast::*;
 use crate::codegen::{Gen, Loc, Place};
 use crate::diagnostics::Span;
 use crate::sema::align_up;
-use crate::sema::expr::{has_real_literal, is_flexible};
+use crate::sema::expr::{has_real_literal, is_byte_view, is_flexible, is_plain};
 use crate::types::*;
 
 /// A variable whose address a program takes: what the object table must list.
@@ -78,36 +78,6 @@ enum Taint {
 
 /// Deepest object nesting the VM accepts (`plc_vm::image::MAX_OBJECT_DEPTH`).
 const MAX_DEPTH: usize = plc_vm::image::MAX_OBJECT_DEPTH;
-
-/// Whether values of `ty` are plain data: bytes without references, interface values or
-/// function-block instances (so reinterpreting them through another reference type, or
-/// walking them with pointer arithmetic, cannot forge a reference).
-pub(crate) fn is_plain(prog: &crate::sema::Program, ty: &Type) -> bool {
-    match ty {
-        Type::Array(a) => is_plain(prog, &a.elem),
-        Type::Struct(i) => prog.structs[*i]
-            .members
-            .iter()
-            .all(|m| is_plain(prog, &m.ty)),
-        Type::Ref(_)
-        | Type::Reference(_)
-        | Type::Interface(_)
-        | Type::Fb(_)
-        | Type::Null
-        | Type::Void => false,
-        _ => true,
-    }
-}
-
-/// Whether a reference to `ty` views raw bytes (`BYTE`, `USINT`, `SINT` or arrays of them):
-/// what CODESYS code points at a STRING's text with.
-fn is_byte_view(ty: &Type) -> bool {
-    match ty {
-        Type::Elem(e) => matches!(e, Elem::Byte | Elem::USInt | Elem::SInt),
-        Type::Array(a) => is_byte_view(&a.elem),
-        _ => false,
-    }
-}
 
 /// Whether an object of `ty` is listed part by part (it holds STRINGs, references or
 /// interface values).
@@ -609,77 +579,6 @@ impl Gen<'_> {
                 self.error(codes::REFERENCE_COMPARISON, e.span, msg);
             }
         }
-    }
-
-    /// The implicit conversion of a pair of types involving references: `None` when the
-    /// pair is none of them, `Some(None)` when it is refused (reported).
-    pub(crate) fn pointer_coercion(
-        &mut self,
-        from: &Type,
-        to: &Type,
-        span: Span,
-    ) -> Option<Option<Implicit>> {
-        let involved = |t: &Type| t.is_pointer_like() || matches!(t, Type::Reference(_));
-        let instance_to_interface = matches!((from, to), (Type::Fb(_), Type::Interface(_)));
-        if !(involved(from) || involved(to) || instance_to_interface) {
-            return None;
-        }
-        let mut implicit = Implicit::Nothing;
-        let ok = match (from, to) {
-            (Type::Null, Type::Ref(_) | Type::Interface(_)) => true,
-            (Type::Ref(a), Type::Ref(b)) => {
-                if a == b || matches!(**a, Type::Void) {
-                    true
-                } else if matches!(**a, Type::String(_)) && is_byte_view(b) {
-                    self.error(codes::REFERENCE_CONVERSION,
-                        span,
-                        "a reference to a STRING cannot become a byte pointer; take REF()/ADR() of the STRING variable itself where the byte pointer is needed",
-                    );
-                    return Some(None);
-                } else if matches!(**b, Type::String(_)) && is_byte_view(a) {
-                    self.error(codes::REFERENCE_CONVERSION,
-                        span,
-                        "a byte pointer cannot become a reference to a STRING: STRINGs here carry a length header in front of their text",
-                    );
-                    return Some(None);
-                } else if let (Type::Fb(c), Type::Fb(d)) = (&**a, &**b) {
-                    self.derives_from(*c, *d)
-                } else {
-                    is_plain(self.prog, a) && is_plain(self.prog, b)
-                }
-            }
-            (Type::Ref(target), Type::Elem(e)) => {
-                if !matches!(**target, Type::Fb(_)) {
-                    implicit = Implicit::AddressToInteger;
-                }
-                e.is_integral() && e.size() >= 4
-            }
-            (Type::Fb(c), Type::Interface(i)) => self.implements(*c, *i),
-            (Type::Ref(target), Type::Interface(i)) => match &**target {
-                Type::Fb(c) => self.implements(*c, *i),
-                _ => false,
-            },
-            (Type::Interface(i), Type::Interface(j)) => self.interface_extends(*i, *j),
-            (Type::Elem(e), Type::Ref(_) | Type::Interface(_)) if e.is_integral() => {
-                let msg = format!(
-                    "an integer cannot become {}: references come from REF()/ADR() (and moving one by a byte offset), so that every access through them can be checked against the variable they were taken from",
-                    self.tname(to)
-                );
-                self.error(codes::REFERENCE_CONVERSION, span, msg);
-                return Some(None);
-            }
-            _ => false,
-        };
-        if !ok {
-            let msg = format!(
-                "type mismatch: expected {}, found {}",
-                self.tname(to),
-                self.tname(from)
-            );
-            self.error(codes::TYPE_MISMATCH, span, msg);
-            return Some(None);
-        }
-        Some(Some(implicit))
     }
 
     // ----- references to temporary storage -------------------------------------------------

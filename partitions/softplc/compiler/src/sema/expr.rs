@@ -16,14 +16,14 @@
 //! infer its type ([`Gen::infer`]); such a walk records only what no real walk has, as the
 //! type its context expects may differ.
 
-use crate::ast::{BinOp, Expr, ExprKind, Ident, UnOp};
+use crate::ast::{Arg, BinOp, Expr, ExprKind, Ident, UnOp};
 use crate::codegen::Gen;
 use crate::codes::{self, Code};
 use crate::diagnostics::Span;
 use crate::sema::ops::{self, BinaryRule, Operand, Operation, OperatorError};
 use crate::sema::{ConstVal, Program, const_eval, single_char};
 use crate::typed::Bare;
-use crate::types::{Elem, Type, common_numeric};
+use crate::types::{Elem, Implicit, NotImplicit, Type, common_numeric, implicit_conversion};
 use plc_vm::isa::Trap;
 
 /// Checks `e`, `expected` being the type its context asks for (it types untyped literals);
@@ -514,6 +514,183 @@ pub(crate) fn has_real_literal(e: &Expr) -> bool {
         }
         ExprKind::Unary(_, x) => has_real_literal(x),
         ExprKind::Binary(_, a, b) => has_real_literal(a) || has_real_literal(b),
+        _ => false,
+    }
+}
+
+// ----- implicit conversions -----------------------------------------------------------------
+
+/// Checks `e` where a value of type `to` is wanted (an assignment's value, an input, an
+/// operand): it must convert implicitly ([`coerce`]). The literal 0 is NULL where a
+/// reference is wanted; a `REFERENCE TO` parameter is bound to the argument, as `REF=`
+/// does.
+pub(crate) fn value_to(g: &mut Gen, e: &Expr, to: &Type) {
+    if to.is_pointer_like() && matches!(e.kind, ExprKind::Int(0)) {
+        return;
+    }
+    if let Type::Reference(target) = to {
+        let as_ref = Type::Ref(target.clone());
+        if matches!(e.kind, ExprKind::Null) {
+            return;
+        }
+        let (id, args) = reference_binding(e);
+        let t = g.ref_function(&id, &args, Some(&as_ref), e.span);
+        coerce(g, &t, &as_ref, e);
+        return;
+    }
+    let t = check(g, e, Some(to));
+    coerce(g, &t, to, e);
+}
+
+/// The call `REF(e)` that binds `e` to a `REFERENCE TO` parameter.
+pub(crate) fn reference_binding(e: &Expr) -> (Ident, [Arg; 1]) {
+    let id = Ident {
+        name: "REF".into(),
+        text: "REF".into(),
+        span: e.span,
+    };
+    let args = [Arg {
+        name: None,
+        output: false,
+        value: e.clone(),
+        span: e.span,
+    }];
+    (id, args)
+}
+
+/// Decides what the value `e` of type `from` takes where `to` is wanted
+/// ([`implicit_conversion`], and the rules of references) and records it
+/// ([`crate::typed::Coercions`]), or reports why it cannot stand there.
+pub(crate) fn coerce(g: &mut Gen, from: &Type, to: &Type, e: &Expr) {
+    if from.is_error() || to.is_error() || from == to {
+        return;
+    }
+    let Some(implicit) = implicit_conversion_at(g, from, to, e.span) else {
+        return;
+    };
+    if !g.dry || g.coercions.of(e).is_none() {
+        g.coercions.record(e, implicit);
+    }
+}
+
+/// What a value of type `from` at `span` takes where `to` is wanted, or `None` when it
+/// cannot stand there (reported).
+fn implicit_conversion_at(g: &mut Gen, from: &Type, to: &Type, span: Span) -> Option<Implicit> {
+    if let Some(decided) = pointer_coercion(g, from, to, span) {
+        return decided;
+    }
+    let (code, msg) = match implicit_conversion(from, to) {
+        Ok(implicit) => return Some(implicit),
+        // Between numbers an explicit conversion would do.
+        Err(NotImplicit::MayLose(f, t)) if f.is_numeric() && t.is_numeric() => {
+            let msg = format!("cannot convert {f} to {t} implicitly (use {f}_TO_{t})");
+            (codes::IMPLICIT_CONVERSION, msg)
+        }
+        Err(NotImplicit::MayLose(..)) => {
+            (codes::IMPLICIT_CONVERSION, mismatch_message(g, from, to))
+        }
+        Err(NotImplicit::Mismatch) => (codes::TYPE_MISMATCH, mismatch_message(g, from, to)),
+    };
+    g.error(code, span, msg);
+    None
+}
+
+fn mismatch_message(g: &Gen, from: &Type, to: &Type) -> String {
+    format!(
+        "type mismatch: expected {}, found {}",
+        g.tname(to),
+        g.tname(from)
+    )
+}
+
+/// The implicit conversion of a pair of types involving references: `None` when the
+/// pair is none of them, `Some(None)` when it is refused (reported).
+fn pointer_coercion(g: &mut Gen, from: &Type, to: &Type, span: Span) -> Option<Option<Implicit>> {
+    let involved = |t: &Type| t.is_pointer_like() || matches!(t, Type::Reference(_));
+    let instance_to_interface = matches!((from, to), (Type::Fb(_), Type::Interface(_)));
+    if !(involved(from) || involved(to) || instance_to_interface) {
+        return None;
+    }
+    let mut implicit = Implicit::Nothing;
+    let ok = match (from, to) {
+        (Type::Null, Type::Ref(_) | Type::Interface(_)) => true,
+        (Type::Ref(a), Type::Ref(b)) => {
+            if a == b || matches!(**a, Type::Void) {
+                true
+            } else if matches!(**a, Type::String(_)) && is_byte_view(b) {
+                g.error(codes::REFERENCE_CONVERSION,
+                    span,
+                    "a reference to a STRING cannot become a byte pointer; take REF()/ADR() of the STRING variable itself where the byte pointer is needed",
+                );
+                return Some(None);
+            } else if matches!(**b, Type::String(_)) && is_byte_view(a) {
+                g.error(codes::REFERENCE_CONVERSION,
+                    span,
+                    "a byte pointer cannot become a reference to a STRING: STRINGs here carry a length header in front of their text",
+                );
+                return Some(None);
+            } else if let (Type::Fb(c), Type::Fb(d)) = (&**a, &**b) {
+                g.derives_from(*c, *d)
+            } else {
+                is_plain(g.prog, a) && is_plain(g.prog, b)
+            }
+        }
+        (Type::Ref(target), Type::Elem(e)) => {
+            if !matches!(**target, Type::Fb(_)) {
+                implicit = Implicit::AddressToInteger;
+            }
+            e.is_integral() && e.size() >= 4
+        }
+        (Type::Fb(c), Type::Interface(i)) => g.implements(*c, *i),
+        (Type::Ref(target), Type::Interface(i)) => match &**target {
+            Type::Fb(c) => g.implements(*c, *i),
+            _ => false,
+        },
+        (Type::Interface(i), Type::Interface(j)) => g.interface_extends(*i, *j),
+        (Type::Elem(e), Type::Ref(_) | Type::Interface(_)) if e.is_integral() => {
+            let msg = format!(
+                "an integer cannot become {}: references come from REF()/ADR() (and moving one by a byte offset), so that every access through them can be checked against the variable they were taken from",
+                g.tname(to)
+            );
+            g.error(codes::REFERENCE_CONVERSION, span, msg);
+            return Some(None);
+        }
+        _ => false,
+    };
+    if !ok {
+        let msg = mismatch_message(g, from, to);
+        g.error(codes::TYPE_MISMATCH, span, msg);
+        return Some(None);
+    }
+    Some(Some(implicit))
+}
+
+/// Whether values of `ty` are plain data: bytes without references, interface values or
+/// function-block instances (so reinterpreting them through another reference type, or
+/// walking them with pointer arithmetic, cannot forge a reference).
+pub(crate) fn is_plain(prog: &Program, ty: &Type) -> bool {
+    match ty {
+        Type::Array(a) => is_plain(prog, &a.elem),
+        Type::Struct(i) => prog.structs[*i]
+            .members
+            .iter()
+            .all(|m| is_plain(prog, &m.ty)),
+        Type::Ref(_)
+        | Type::Reference(_)
+        | Type::Interface(_)
+        | Type::Fb(_)
+        | Type::Null
+        | Type::Void => false,
+        _ => true,
+    }
+}
+
+/// Whether a reference to `ty` views raw bytes (`BYTE`, `USINT`, `SINT` or arrays of them):
+/// what CODESYS code points at a STRING's text with.
+pub(crate) fn is_byte_view(ty: &Type) -> bool {
+    match ty {
+        Type::Elem(e) => matches!(e, Elem::Byte | Elem::USInt | Elem::SInt),
+        Type::Array(a) => is_byte_view(&a.elem),
         _ => false,
     }
 }
