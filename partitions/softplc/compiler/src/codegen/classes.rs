@@ -96,39 +96,42 @@ impl Gen<'_> {
 
     // ----- THIS and SUPER --------------------------------------------------------------
 
-    /// The class `THIS` (or, with `superclass`, `SUPER`) stands for here.
-    fn this_class(&mut self, superclass: bool, span: Span) -> Option<usize> {
+    /// The class `THIS` (or, with `superclass`, `SUPER`) stands for here; `Err` says why
+    /// there is none.
+    pub(crate) fn this_class(&self, superclass: bool) -> Result<usize, String> {
         let Some(c) = self
             .context_class()
             .filter(|&c| self.prog.pous[c].kind == PouKind::FunctionBlock)
         else {
             let what = if superclass { "SUPER" } else { "THIS" };
-            self.error(codes::NO_INSTANCE,
-                span,
-                format!("{what} is the instance a function block's body, method or action runs on; there is none here"),
-            );
-            return None;
+            return Err(format!(
+                "{what} is the instance a function block's body, method or action runs on; there is none here"
+            ));
         };
         if !superclass {
-            return Some(c);
+            return Ok(c);
         }
-        match self.prog.pous[c].base {
-            Some(b) => Some(b),
-            None => {
-                let name = self.prog.pous[c].text.clone();
-                self.error(
-                    codes::NO_INSTANCE,
-                    span,
-                    format!("`{name}` extends no function block: there is no SUPER"),
-                );
-                None
-            }
+        let pou = &self.prog.pous[c];
+        pou.base.ok_or_else(|| {
+            format!(
+                "`{}` extends no function block: there is no SUPER",
+                pou.text
+            )
+        })
+    }
+
+    /// The class `THIS` (or `SUPER`) at `span` stands for, as the checker found it.
+    fn checked_this_class(&mut self, superclass: bool, span: Span) -> Option<usize> {
+        let class = self.this_class(superclass).ok();
+        if class.is_none() {
+            self.missing_record(span, "passed a THIS or SUPER where there is no instance");
         }
+        class
     }
 
     /// `THIS` / `SUPER`: a reference to the instance (the frame base).
     pub(crate) fn this_expr(&mut self, superclass: bool, span: Span) -> Type {
-        match self.this_class(superclass, span) {
+        match self.checked_this_class(superclass, span) {
             Some(c) => {
                 self.emit(|b| b.lea_rel(0));
                 Type::Ref(Box::new(Type::Fb(c)))
@@ -139,13 +142,7 @@ impl Gen<'_> {
 
     /// `THIS^` / `SUPER^`: the instance itself.
     pub(crate) fn this_place(&mut self, superclass: bool, span: Span) -> Option<Place> {
-        let c = self.this_class(superclass, span)?;
-        Some(Place {
-            loc: Loc::Rel(0),
-            ty: Type::Fb(c),
-            writable: true,
-            window: None,
-        })
+        Some(Place::instance(self.checked_this_class(superclass, span)?))
     }
 
     // ----- receivers and lookups ---------------------------------------------------------

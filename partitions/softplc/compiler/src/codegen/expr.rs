@@ -322,26 +322,14 @@ impl Gen<'_> {
             }
             ExprKind::Unary(op, x) => self.unary(*op, x, expected, e.span),
             ExprKind::Binary(op, a, b) => self.binary(*op, a, b, expected, e.span),
-            ExprKind::This
-            | ExprKind::Super
-            | ExprKind::Member(..)
-            | ExprKind::Index(..)
-            | ExprKind::Deref(..)
-            | ExprKind::Bits { .. }
-            | ExprKind::Call { .. } => self.access_or_call(e, expected),
-        }
-    }
-
-    /// Compiles THIS, SUPER, an access (a member, an element, a dereference, a partial
-    /// access) or a call. The checking pass checks them here too: the expression checker
-    /// ([`crate::sema::expr`]) leaves them to this walk in its checking mode.
-    pub(crate) fn access_or_call(&mut self, e: &Expr, expected: Option<&Type>) -> Type {
-        match &e.kind {
             ExprKind::This => self.this_expr(false, e.span),
             ExprKind::Super => self.this_expr(true, e.span),
             ExprKind::Member(..) if let Some(t) = self.property_read(e) => t,
             ExprKind::Call { callee, args } => self.call(callee, args, expected, e.span),
-            _ => match self.place(e) {
+            ExprKind::Member(..)
+            | ExprKind::Index(..)
+            | ExprKind::Deref(..)
+            | ExprKind::Bits { .. } => match self.place(e) {
                 Some(p) => {
                     self.load(&p);
                     p.ty

@@ -25,6 +25,7 @@ mod expr;
 mod init;
 mod ops;
 mod place;
+pub(crate) use place::element_offsets;
 mod refs;
 mod stdfuncs;
 mod stmt;

@@ -283,51 +283,25 @@ impl Gen<'_> {
 
     /// The place `inner^`: the variable a reference refers to (pushes the reference).
     pub(crate) fn deref_place(&mut self, inner: &Expr, span: Span) -> Option<Place> {
-        let t = self.expr(inner, None);
-        match t {
-            Type::Ref(target) => match *target {
-                Type::Fb(pi) => {
-                    self.op(Opcode::ChkNull);
-                    Some(Place {
-                        loc: Loc::Ind(0),
-                        ty: Type::Fb(pi),
-                        writable: true,
-                        window: None,
-                    })
-                }
-                Type::Void | Type::Null => {
-                    self.error(codes::NULL_DEREFERENCE, span, "NULL cannot be dereferenced");
-                    self.op(Opcode::Drop);
-                    None
-                }
-                target => Some(Place {
-                    loc: Loc::Ref(0),
-                    ty: target,
-                    writable: true,
-                    window: None,
-                }),
-            },
-            Type::Null => {
-                self.error(codes::NULL_DEREFERENCE, span, "NULL cannot be dereferenced");
-                self.op(Opcode::Drop);
-                None
+        match self.expr(inner, None) {
+            Type::Ref(target) if !matches!(*target, Type::Void | Type::Null) => {
+                Some(self.referred_place(*target))
             }
-            Type::Error => {
-                self.op(Opcode::Drop);
-                None
-            }
-            other => {
-                let msg = format!(
-                    "`^` dereferences a reference (REF_TO, POINTER TO), not {}",
-                    self.tname(&other)
-                );
-                self.error(codes::DEREFERENCE_NON_REFERENCE, span, msg);
-                if !matches!(other, Type::Void) {
-                    self.op(Opcode::Drop);
-                }
+            _ => {
+                self.missing_record(span, "passed a dereference of no reference");
                 None
             }
         }
+    }
+
+    /// What the reference on the stack refers to, as [`Place::referred`] says (an instance
+    /// is checked for NULL here).
+    fn referred_place(&mut self, target: Type) -> Place {
+        let place = Place::referred(target);
+        if matches!(place.ty, Type::Fb(_)) {
+            self.op(Opcode::ChkNull);
+        }
+        place
     }
 
     /// A `REFERENCE TO` place stands for the variable it refers to.
@@ -344,23 +318,7 @@ impl Gen<'_> {
             ..p
         });
         self.load(&cell);
-        match target {
-            Type::Fb(pi) => {
-                self.op(Opcode::ChkNull);
-                Place {
-                    loc: Loc::Ind(0),
-                    ty: Type::Fb(pi),
-                    writable: true,
-                    window: None,
-                }
-            }
-            t => Place {
-                loc: Loc::Ref(0),
-                ty: t,
-                writable: true,
-                window: None,
-            },
-        }
+        self.referred_place(target)
     }
 
     /// Checks a place reached through a reference for the bytes of its type and turns it
@@ -381,32 +339,25 @@ impl Gen<'_> {
             t => self.prog.size_align(t).0,
         };
         self.emit(|b| b.ref_check(size));
-        Place {
-            loc: Loc::Ind(0),
-            ..p
-        }
+        p.finalized()
     }
 
-    /// Element `idx` of an array reached through a reference (the reference cell is on the
-    /// stack): the offsets move the reference (`REF_ADD`), the element is checked when it is
-    /// accessed.
-    #[allow(clippy::too_many_arguments)]
+    /// The computed indices `idx` of an array reached through a reference (the reference
+    /// cell is on the stack): they move the reference (`REF_ADD`); the element is checked
+    /// when it is accessed.
     pub(crate) fn index_through_reference(
         &mut self,
-        offset: u32,
         arr: &ArrayType,
         idx: &[Expr],
         consts: &[Option<i128>],
         strides: &[i64],
-        static_off: i64,
-    ) -> Option<Place> {
+    ) {
         for (d, c) in consts.iter().enumerate() {
             if c.is_some() {
                 continue;
             }
             let (lo, hi) = arr.dims[d];
-            let t = self.expr(&idx[d], Some(&Type::DINT));
-            self.check_index_type(&t, &idx[d]);
+            self.expr(&idx[d], Some(&Type::DINT));
             let stride = strides[d];
             self.emit(|b| {
                 b.chk_index(lo, hi);
@@ -421,12 +372,6 @@ impl Gen<'_> {
                 b.ref_add();
             });
         }
-        Some(Place {
-            loc: Loc::Ref(offset.wrapping_add(static_off as u32)),
-            ty: arr.elem.clone(),
-            writable: true,
-            window: None,
-        })
     }
 
     /// The type of an operand of a reference operation; `None` for an untyped integer

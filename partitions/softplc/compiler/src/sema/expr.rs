@@ -21,6 +21,7 @@ use crate::codegen::Gen;
 use crate::codes::{self, Code};
 use crate::diagnostics::Span;
 use crate::sema::ops::{self, BinaryRule, Operand, Operation, OperatorError};
+use crate::sema::place::{place, this_class};
 use crate::sema::{ConstVal, Program, const_eval, single_char};
 use crate::typed::Bare;
 use crate::types::{Elem, Implicit, NotImplicit, Type, common_numeric, implicit_conversion};
@@ -52,13 +53,19 @@ pub(crate) fn check(g: &mut Gen, e: &Expr, expected: Option<&Type>) -> Type {
         ExprKind::Null => Type::Null,
         ExprKind::Unary(op, x) => unary(g, *op, x, expected, e.span),
         ExprKind::Binary(op, a, b) => binary(g, *op, a, b, expected, e.span),
-        ExprKind::This
-        | ExprKind::Super
-        | ExprKind::Member(..)
+        ExprKind::This | ExprKind::Super => {
+            let superclass = matches!(e.kind, ExprKind::Super);
+            match this_class(g, superclass, e.span) {
+                Some(class) => Type::Ref(Box::new(Type::Fb(class))),
+                None => Type::Error,
+            }
+        }
+        ExprKind::Member(..) if let Some(t) = g.property_read(e) => t,
+        ExprKind::Member(..)
         | ExprKind::Index(..)
         | ExprKind::Deref(..)
-        | ExprKind::Bits { .. }
-        | ExprKind::Call { .. } => g.access_or_call(e, expected),
+        | ExprKind::Bits { .. } => place(g, e).map_or(Type::Error, |p| p.ty),
+        ExprKind::Call { callee, args } => g.call(callee, args, expected, e.span),
     }
 }
 
@@ -205,7 +212,7 @@ fn bare_name(g: &mut Gen, e: &Expr, n: &Ident, expected: Option<&Type>) -> Type 
         Bare::Exception(_) => Type::Exception,
         Bare::Variable => {
             g.sync_if_byte_viewed(e);
-            g.place(e).map_or(Type::Error, |p| p.ty)
+            place(g, e).map_or(Type::Error, |p| p.ty)
         }
     }
 }

@@ -14,6 +14,7 @@ pub mod body;
 mod config;
 pub(crate) mod expr;
 pub mod ops;
+pub(crate) mod place;
 pub mod stdfuncs;
 pub(crate) mod stmt;
 
