@@ -19,6 +19,7 @@
 //! ELSE falls through.
 
 mod calls;
+pub(crate) use calls::{Bound, instance_callee};
 mod classes;
 mod convert;
 mod expr;
@@ -27,6 +28,7 @@ mod ops;
 mod place;
 pub(crate) use place::element_offsets;
 mod refs;
+pub(crate) use refs::reference_to;
 mod stdfuncs;
 mod stmt;
 mod strings;

@@ -230,7 +230,7 @@ impl Gen<'_> {
             }
             return false;
         }
-        self.check_output_writable(place, target);
+        crate::sema::call::check_output_writable(self, place, target);
         true
     }
 

@@ -11,6 +11,7 @@
 //! relative to the frame base register.
 
 pub mod body;
+pub(crate) mod call;
 mod config;
 pub(crate) mod expr;
 pub mod ops;
