@@ -18,21 +18,30 @@ use crate::ast::*;
 use crate::codegen::calls::CallBase;
 use crate::codegen::{Gen, Loc, Place, scalar_mem};
 use crate::diagnostics::Span;
-use crate::sema::{Member, MemberKind, VarDef};
+use crate::sema::{MemberKind, VarDef};
 use crate::typed::{Accessor, Bare, Method, PropertyAccess, Receiver};
 use crate::types::*;
 
-/// A method as a call sees it: the slot and signature of a dynamic call, or the POU of a
-/// static one.
-struct Dynamic {
-    slot: u16,
-    label: String,
+/// A method as a dynamic call sees it: its slot and signature.
+pub(crate) struct Dynamic {
+    pub slot: u16,
+    pub label: String,
     /// Parameters (and outputs) in frame order.
-    params: Vec<VarDef>,
+    pub params: Vec<VarDef>,
     /// Result type and its offset in the method frame.
-    result: Option<(Type, u32)>,
+    pub result: Option<(Type, u32)>,
     /// The methods the call may run (for the recursion check).
-    targets: Vec<usize>,
+    pub targets: Vec<usize>,
+}
+
+/// The argument list of a property's SET accessor called to write `value`.
+pub(crate) fn setter_arguments(value: &Expr) -> [Arg; 1] {
+    [Arg {
+        name: None,
+        output: false,
+        value: value.clone(),
+        span: value.span,
+    }]
 }
 
 impl Gen<'_> {
@@ -148,7 +157,7 @@ impl Gen<'_> {
     // ----- receivers and lookups ---------------------------------------------------------
 
     /// What `base` in `base.m(...)` is, when it is an instance or an interface value.
-    fn receiver(&mut self, base: &Expr) -> Option<Receiver> {
+    pub(crate) fn receiver(&mut self, base: &Expr) -> Option<Receiver> {
         match self.infer(base) {
             Type::Fb(class) => Some(Receiver::Instance {
                 class,
@@ -186,61 +195,9 @@ impl Gen<'_> {
             || self.prog.global(name).is_some()
     }
 
-    /// Reports what is wrong with a call of the method or action `member` at `span` (the
-    /// checking pass asks): a member the caller may not use, arguments to an action, an
-    /// ABSTRACT method called where the call is not dispatched (`undispatched`: on an
-    /// instance of exactly its block, or through SUPER).
-    fn check_member_call(&mut self, member: usize, undispatched: bool, args: &[Arg], span: Span) {
-        let Some(m) = self.prog.pous[member].member.clone() else {
-            return;
-        };
-        self.check_access(&m, member, span);
-        if m.kind == MemberKind::Action
-            && let Some(a) = args.first()
-        {
-            self.error(
-                codes::ARGUMENT_COUNT,
-                a.span,
-                "an action takes no arguments",
-            );
-        }
-        if m.is_abstract && undispatched {
-            let msg = format!(
-                "`{}` is ABSTRACT: it has no implementation to call",
-                self.prog.pous[member].text
-            );
-            self.error(codes::ABSTRACT_INSTANCE, span, msg);
-        }
-    }
-
-    /// Reports a call of the PRIVATE or PROTECTED member `m` (the POU `member`) from where it
-    /// may not be called.
-    fn check_access(&mut self, m: &Member, member: usize, span: Span) {
-        let ctx = self.context_class();
-        let allowed = match m.access {
-            Access::Private => ctx == Some(m.owner),
-            Access::Protected => ctx.is_some_and(|c| self.prog.derives_from(c, m.owner)),
-            Access::Public | Access::Internal => true,
-        };
-        if !allowed {
-            let owner = self.prog.pous[m.owner].text.clone();
-            let who = if m.access == Access::Private {
-                format!("only `{owner}` itself may use it")
-            } else {
-                format!("only `{owner}` and blocks derived from it may use it")
-            };
-            let msg = format!(
-                "`{}` is {}: {who}",
-                self.prog.pous[member].text,
-                m.access.keyword()
-            );
-            self.error(codes::ACCESS_DENIED, span, msg);
-        }
-    }
-
     /// The methods a call of `member` on an instance of static type `class` may run: the
     /// implementations of `class` and of the blocks derived from it.
-    fn possible_targets(&self, class: usize, member: usize) -> Vec<usize> {
+    pub(crate) fn possible_targets(&self, class: usize, member: usize) -> Vec<usize> {
         let Some(m) = &self.prog.pous[member].member else {
             return vec![member];
         };
@@ -256,7 +213,7 @@ impl Gen<'_> {
     }
 
     /// The dynamic view of method POU `member` (called through its class slot).
-    fn dynamic_of(&self, member: usize, targets: Vec<usize>) -> Option<Dynamic> {
+    pub(crate) fn dynamic_of(&self, member: usize, targets: Vec<usize>) -> Option<Dynamic> {
         let slot = *self.prog.slots.get(&member)?;
         let p = &self.prog.pous[member];
         let result = p
@@ -275,58 +232,6 @@ impl Gen<'_> {
 
     // ----- calls -------------------------------------------------------------------------
 
-    /// The method or action `callee` calls: `m(...)` inside a block, `inst.m(...)`,
-    /// `p^.m(...)`, `itf.m(...)`, `SUPER^.m(...)`; `Ok(None)` when `callee` is no such call,
-    /// `Err` with the call's type when the method is unknown (reported).
-    pub(crate) fn resolve_method(
-        &mut self,
-        callee: &Expr,
-        args: &[Arg],
-    ) -> Result<Option<Method>, Type> {
-        match &callee.kind {
-            ExprKind::Name(n) => {
-                if self.is_visible_var(&n.name) {
-                    return Ok(None);
-                }
-                let Some(ctx) = self.context_class() else {
-                    return Ok(None);
-                };
-                Ok(self
-                    .prog
-                    .find_member(ctx, &n.name, MemberKind::Method)
-                    .or_else(|| self.prog.find_member(ctx, &n.name, MemberKind::Action))
-                    .map(Method::Own))
-            }
-            ExprKind::Member(base, m) => match self.receiver(base) {
-                Some(Receiver::Interface(i)) => {
-                    let Some(im) = self
-                        .prog
-                        .interface_member(i, &m.name, MemberKind::Method)
-                        .cloned()
-                    else {
-                        let msg = format!(
-                            "interface `{}` has no method `{}`",
-                            self.prog.interfaces[i].text, m.text
-                        );
-                        self.error(codes::UNKNOWN_METHOD, m.span, msg);
-                        for a in args {
-                            self.infer(&a.value);
-                        }
-                        return Err(Type::Error);
-                    };
-                    Ok(Some(Method::OfInterface(i, Box::new(im))))
-                }
-                Some(Receiver::Instance { class, .. }) => Ok(self
-                    .prog
-                    .find_member(class, &m.name, MemberKind::Method)
-                    .or_else(|| self.prog.find_member(class, &m.name, MemberKind::Action))
-                    .map(Method::OfInstance)),
-                None => Ok(None),
-            },
-            _ => Ok(None),
-        }
-    }
-
     /// Calls the resolved method or action `method` of `callee`.
     pub(crate) fn call_method(
         &mut self,
@@ -341,12 +246,7 @@ impl Gen<'_> {
         };
         match (method, base) {
             (Method::Own(member), _) => {
-                let ctx = self.context_class().unwrap_or(self.cur);
-                let recv = Receiver::Instance {
-                    class: ctx,
-                    exact: self.prog.pous[ctx].kind == PouKind::Program,
-                    superclass: false,
-                };
+                let recv = self.own_receiver(self.context_class().unwrap_or(self.cur));
                 self.call_member(None, recv, *member, args, span)
             }
             (Method::OfInterface(i, im), Some(base)) => {
@@ -368,7 +268,7 @@ impl Gen<'_> {
     }
 
     /// The dynamic view of interface member `im` of interface `i`.
-    fn interface_dynamic(&self, i: usize, im: &crate::sema::InterfaceMember) -> Dynamic {
+    pub(crate) fn interface_dynamic(&self, i: usize, im: &crate::sema::InterfaceMember) -> Dynamic {
         let targets = self
             .prog
             .classes
@@ -423,9 +323,6 @@ impl Gen<'_> {
         else {
             unreachable!("interfaces have no static members")
         };
-        if self.check_only {
-            self.check_member_call(member, exact || superclass, args, span);
-        }
         let kind = self.prog.pous[member].member.as_ref().map(|m| m.kind);
         if kind == Some(MemberKind::Action) {
             self.calls.push((self.cur, member, span));
@@ -649,8 +546,7 @@ impl Gen<'_> {
     // ----- properties --------------------------------------------------------------------
 
     /// `e` as a property access: the instance expression (`None`: the current instance),
-    /// the property and its name. The checking pass resolves it and records it, or that `e`
-    /// is no property access ([`crate::typed::Properties`]); emission reads the record.
+    /// the property and its name, as the checker recorded it ([`crate::typed::Properties`]).
     fn property_target<'e>(
         &mut self,
         e: &'e Expr,
@@ -660,63 +556,11 @@ impl Gen<'_> {
             ExprKind::Member(base, m) => (Some(&**base), m),
             _ => return None,
         };
-        let property = if self.check_only {
-            let property = self.resolve_property(base, name);
-            self.properties.record(self.cur, name, property.clone());
-            property
-        } else {
-            match self.properties.of(self.cur, name) {
-                Some(property) => property.clone(),
-                None => {
-                    self.missing_record(name.span, "did not decide whether this is a property");
-                    None
-                }
-            }
+        let Some(property) = self.properties.of(self.cur, name).cloned() else {
+            self.missing_record(name.span, "did not decide whether this is a property");
+            return None;
         };
         Some((base, property?, name))
-    }
-
-    /// The property `base.name` (`name` alone when `base` is `None`) denotes, if it is one: a
-    /// variable of that name shadows a property of the current instance.
-    fn resolve_property(&mut self, base: Option<&Expr>, name: &Ident) -> Option<PropertyAccess> {
-        let Some(base) = base else {
-            if self.is_visible_var(&name.name) {
-                return None;
-            }
-            let Bare::Property { class, getter } = self.own_property(name)? else {
-                return None;
-            };
-            let setter = self.prog.find_member(class, &name.name, MemberKind::Setter);
-            return Some(PropertyAccess {
-                recv: self.own_receiver(class),
-                getter: getter.map(Accessor::Pou),
-                setter: setter.map(Accessor::Pou),
-            });
-        };
-        let recv = self.receiver(base)?;
-        let (getter, setter) = match recv {
-            Receiver::Instance { class, .. } => {
-                let find = |kind| {
-                    self.prog
-                        .find_member(class, &name.name, kind)
-                        .map(Accessor::Pou)
-                };
-                (find(MemberKind::Getter), find(MemberKind::Setter))
-            }
-            Receiver::Interface(i) => {
-                let find = |kind| {
-                    self.prog
-                        .interface_member(i, &name.name, kind)
-                        .map(|im| Accessor::Interface(Box::new(im.clone())))
-                };
-                (find(MemberKind::Getter), find(MemberKind::Setter))
-            }
-        };
-        (getter.is_some() || setter.is_some()).then_some(PropertyAccess {
-            recv,
-            getter,
-            setter,
-        })
     }
 
     /// The property bare name `n` denotes in the class whose body is walked, if it names one
@@ -729,7 +573,7 @@ impl Gen<'_> {
     }
 
     /// The receiver of a member of `class` named bare in its own body.
-    fn own_receiver(&self, class: usize) -> Receiver {
+    pub(crate) fn own_receiver(&self, class: usize) -> Receiver {
         Receiver::Instance {
             class,
             exact: self.prog.pous[class].kind == PouKind::Program,
@@ -738,25 +582,15 @@ impl Gen<'_> {
     }
 
     /// Reads property `e` (a bare name) of `class`, the class whose body is walked, through
-    /// its GET accessor `getter` (reported when it has none).
+    /// its GET accessor `getter`.
     pub(crate) fn own_property_read(
         &mut self,
         class: usize,
         getter: Option<usize>,
         e: &Expr,
     ) -> Type {
-        let ExprKind::Name(name) = &e.kind else {
-            return Type::Error;
-        };
         let Some(getter) = getter else {
-            self.error(
-                codes::PROPERTY_ACCESS,
-                name.span,
-                format!(
-                    "property `{}` is write-only (it has no GET accessor)",
-                    name.text
-                ),
-            );
+            self.missing_record(e.span, "passed a read of a property without GET accessor");
             return Type::Error;
         };
         self.call_member(None, self.own_receiver(class), getter, &[], e.span)
@@ -773,12 +607,7 @@ impl Gen<'_> {
         let Some((base, property, name)) = self.property_target(target) else {
             return false;
         };
-        let args = [Arg {
-            name: None,
-            output: false,
-            value: value.clone(),
-            span: value.span,
-        }];
+        let args = setter_arguments(value);
         self.accessor_call(
             base,
             &property,
@@ -799,22 +628,6 @@ impl Gen<'_> {
         args: &[Arg],
         span: Span,
     ) -> Type {
-        let missing = |g: &mut Self| {
-            let what = if kind == MemberKind::Getter {
-                "is write-only (it has no GET accessor)"
-            } else {
-                "is read-only (it has no SET accessor)"
-            };
-            g.error(
-                codes::PROPERTY_ACCESS,
-                name.span,
-                format!("property `{}` {what}", name.text),
-            );
-            for a in args {
-                g.infer(&a.value);
-            }
-            Type::Error
-        };
         let accessor = match kind {
             MemberKind::Getter => &property.getter,
             _ => &property.setter,
@@ -827,7 +640,10 @@ impl Gen<'_> {
                 let d = self.interface_dynamic(i, im);
                 self.call_dynamic(base, d, args, span)
             }
-            _ => missing(self),
+            _ => {
+                self.missing_record(name.span, "passed a property access without its accessor");
+                Type::Error
+            }
         }
     }
 

@@ -21,6 +21,7 @@
 mod calls;
 pub(crate) use calls::{Bound, instance_callee};
 mod classes;
+pub(crate) use classes::{Dynamic, setter_arguments};
 mod convert;
 mod expr;
 mod init;

@@ -39,7 +39,7 @@ pub(crate) fn call(
     g.callees.record(callee, target.clone());
     match &target {
         Callee::RefFunction(n) => g.ref_function(n, args, expected, span),
-        Callee::Method(method) => g.call_method(method, callee, args, span),
+        Callee::Method(method) => crate::sema::class::method_call(g, method, callee, args, span),
         Callee::Function(pi) => static_call(g, *pi, args, span),
         Callee::Standard(n) => {
             if let Some(t) = g.std_call(&n.name, n, args, expected, span) {
@@ -67,7 +67,7 @@ fn callee_of(g: &mut Gen, callee: &Expr, args: &[Arg]) -> Result<Callee, Type> {
     {
         return Ok(Callee::RefFunction(n.clone()));
     }
-    if let Some(method) = g.resolve_method(callee, args)? {
+    if let Some(method) = crate::sema::class::resolve_method(g, callee, args)? {
         return Ok(Callee::Method(method));
     }
     // `Lib.F(...)`: a function qualified by a namespace (ours or a library's).

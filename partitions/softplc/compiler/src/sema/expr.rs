@@ -60,7 +60,7 @@ pub(crate) fn check(g: &mut Gen, e: &Expr, expected: Option<&Type>) -> Type {
                 None => Type::Error,
             }
         }
-        ExprKind::Member(..) if let Some(t) = g.property_read(e) => t,
+        ExprKind::Member(..) if let Some(t) = crate::sema::class::property_read(g, e) => t,
         ExprKind::Member(..)
         | ExprKind::Index(..)
         | ExprKind::Deref(..)
@@ -207,7 +207,9 @@ fn bare_name(g: &mut Gen, e: &Expr, n: &Ident, expected: Option<&Type>) -> Type 
         g.bare_names.record(g.cur, n, bare.clone());
     }
     match bare {
-        Bare::Property { class, getter } => g.own_property_read(class, getter, e),
+        Bare::Property { class, getter } => {
+            crate::sema::class::own_property_read(g, class, getter, e)
+        }
         Bare::EnumValue { ty, .. } => Type::Enum(ty),
         Bare::Exception(_) => Type::Exception,
         Bare::Variable => {

@@ -12,6 +12,7 @@
 
 pub mod body;
 pub(crate) mod call;
+pub(crate) mod class;
 mod config;
 pub(crate) mod expr;
 pub mod ops;

@@ -307,7 +307,7 @@ impl BodyChecker<'_, '_> {
     }
 
     fn assign(&mut self, target: &Expr, value: &Expr) {
-        if self.g.property_write(target, value) {
+        if crate::sema::class::property_write(self.g, target, value) {
             return;
         }
         let Some(p) = self.g.place(target) else {
