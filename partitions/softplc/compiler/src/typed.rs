@@ -50,7 +50,9 @@
 
 use std::collections::HashMap;
 
-use crate::ast::{Expr, Ident, Unit};
+use std::rc::Rc;
+
+use crate::ast::{Arg, Expr, Ident, Unit};
 use crate::codegen::Gen;
 use crate::codes;
 use crate::diagnostics::{Diagnostics, SourceMap, Span};
@@ -106,6 +108,11 @@ pub type ExprTypes = ExprTable<Type>;
 /// operator's, or a standard function's such as ADD: an expression is the first operand of
 /// at most one).
 pub type Operations = ExprTable<Operation>;
+
+/// The argument list a property write passes to its SET accessor, keyed by the value
+/// written: made once, by the checker, so that emission walks the very expressions whose
+/// records the checker left (the records are keyed by the expressions' addresses).
+pub type SetterArguments = ExprTable<Rc<[Arg; 1]>>;
 
 /// The value of each CASE label expression (a constant, an enumeration value of the
 /// selector's type or an exception name), as the checker resolved it.
@@ -357,6 +364,8 @@ pub struct Checked {
     pub properties: Properties,
     /// The value of every CASE label.
     pub case_labels: CaseLabels,
+    /// The argument list of every property write.
+    pub setter_arguments: SetterArguments,
     /// The calls between user POUs (the call graph the recursion rule is judged on).
     pub calls: Vec<CallEdge>,
 }
@@ -387,6 +396,7 @@ pub fn check(
         conversion_arguments: std::mem::take(&mut checker.conversion_arguments),
         operations: std::mem::take(&mut checker.operations),
         properties: std::mem::take(&mut checker.properties),
+        setter_arguments: std::mem::take(&mut checker.setter_arguments),
     };
     drop(checker);
     body::check_recursion(prog, &checked.calls, diags);
@@ -426,6 +436,7 @@ pub fn emit(
     generator.conversion_arguments = checked.conversion_arguments;
     generator.operations = checked.operations;
     generator.properties = checked.properties;
+    generator.setter_arguments = checked.setter_arguments;
     generator.generate();
     let emitted = Emitted {
         builder: std::mem::take(&mut generator.b),

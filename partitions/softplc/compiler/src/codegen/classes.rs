@@ -11,6 +11,8 @@
 //! method the instance's class runs, the caller stores the arguments there, `CALL_VIRT`
 //! calls it.
 
+use std::rc::Rc;
+
 use crate::codes;
 use plc_vm::isa::{Builtin, MemType, Opcode};
 
@@ -32,16 +34,6 @@ pub(crate) struct Dynamic {
     pub result: Option<(Type, u32)>,
     /// The methods the call may run (for the recursion check).
     pub targets: Vec<usize>,
-}
-
-/// The argument list of a property's SET accessor called to write `value`.
-pub(crate) fn setter_arguments(value: &Expr) -> [Arg; 1] {
-    [Arg {
-        name: None,
-        output: false,
-        value: value.clone(),
-        span: value.span,
-    }]
 }
 
 impl Gen<'_> {
@@ -493,11 +485,14 @@ impl Gen<'_> {
                 };
                 self.expr(&e, None);
             }
-            (t, Some(Init::Expr(e))) if scalar_mem(t).is_some() => {
-                let (t, e) = (t.clone(), e.clone());
-                self.value_to(&e, &t);
+            (t, _) if scalar_mem(t).is_some() => {
+                let cell = self.default_cell(v).unwrap_or(0);
+                match t.elem() {
+                    Some(Elem::Real) => self.emit(|b| b.push_f32(f32::from_bits(cell as u32))),
+                    Some(Elem::LReal) => self.emit(|b| b.push_f64(f64::from_bits(cell))),
+                    _ => self.push_int(cell as i64),
+                }
             }
-            (t, _) if scalar_mem(t).is_some() => self.push_int(0),
             (t, _) => {
                 let (size, al) = self.prog.size_align(t);
                 let zero = self.alloc_static(size, al);
@@ -505,6 +500,21 @@ impl Gen<'_> {
             }
         }
         self.store_into_frame(frame, v, false);
+    }
+
+    /// The cell a parameter `v` of a scalar type starts with when a dynamic call leaves it
+    /// unconnected: its declared initial value, a constant (reported where it is not, or
+    /// does not fit), else 0 (for a reference: NULL).
+    pub(crate) fn default_cell(&mut self, v: &VarDef) -> Option<u64> {
+        let (Some(Init::Expr(e)), Some(elem)) = (&v.init, v.ty.elem()) else {
+            return Some(0);
+        };
+        let Some(value) = self.const_value(e) else {
+            let msg = "initial value must be a constant expression";
+            self.error(codes::NOT_CONSTANT, e.span, msg);
+            return None;
+        };
+        self.const_cell(&value, &v.ty, elem, e.span)
     }
 
     /// Pushes a method's result from the frame whose address is on the stack (`off` into
@@ -563,6 +573,22 @@ impl Gen<'_> {
         Some((base, property?, name))
     }
 
+    /// The argument list of the SET accessor a write of `value` into a property calls: the
+    /// one the checking pass made ([`crate::typed::SetterArguments`]).
+    pub(crate) fn setter_arguments(&mut self, value: &Expr) -> Rc<[Arg; 1]> {
+        if let Some(args) = self.setter_arguments.of(value) {
+            return args.clone();
+        }
+        let args = Rc::new([Arg {
+            name: None,
+            output: false,
+            value: value.clone(),
+            span: value.span,
+        }]);
+        self.setter_arguments.record(value, args.clone());
+        args
+    }
+
     /// The property bare name `n` denotes in the class whose body is walked, if it names one
     /// (a variable of that name shadows it: the caller asks first).
     pub(crate) fn own_property(&self, n: &Ident) -> Option<Bare> {
@@ -607,13 +633,13 @@ impl Gen<'_> {
         let Some((base, property, name)) = self.property_target(target) else {
             return false;
         };
-        let args = setter_arguments(value);
+        let args = self.setter_arguments(value);
         self.accessor_call(
             base,
             &property,
             name,
             MemberKind::Setter,
-            &args,
+            &args[..],
             target.span,
         );
         true

@@ -2,7 +2,7 @@
 
 use super::*;
 use crate::sema::expr::{
-    char_literal_type, int_literal_type, real_literal_type, reference_binding, string_literal_type,
+    char_literal_type, int_literal_type, real_literal_type, string_literal_type,
     typed_literal_value, wstring_literal_type,
 };
 use crate::sema::ops::{Operation, UnaryRule};
@@ -40,8 +40,7 @@ impl Gen<'_> {
                 self.push_int(0);
                 return;
             }
-            let (id, args) = reference_binding(e);
-            let t = self.ref_function(&id, &args, Some(&as_ref), e.span);
+            let t = self.make_reference(e, Some(&as_ref));
             self.coerce(&t, &as_ref, e);
             return;
         }

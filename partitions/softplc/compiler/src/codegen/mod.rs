@@ -21,7 +21,7 @@
 mod calls;
 pub(crate) use calls::{Bound, instance_callee};
 mod classes;
-pub(crate) use classes::{Dynamic, setter_arguments};
+pub(crate) use classes::Dynamic;
 mod convert;
 mod expr;
 mod init;
@@ -45,7 +45,7 @@ use crate::diagnostics::{Diagnostics, SourceMap, Span};
 use crate::sema::{ConstScope, ConstVal, Program, VarDef, const_eval};
 use crate::typed::{
     Bare, BareNames, Bindings, Callees, CaseLabels, Coercions, ConversionArguments, ExprTypes,
-    GenericTypes, Members, Operations, Properties, StdArguments, Variables,
+    GenericTypes, Members, Operations, Properties, SetterArguments, StdArguments, Variables,
 };
 use crate::types::*;
 
@@ -179,6 +179,9 @@ pub(crate) struct Gen<'a> {
     /// Which property each member read and assignment target reaches, if any: resolved by
     /// the checking pass, read by emission.
     pub(crate) properties: Properties,
+    /// The argument list of each property write: made by the checking pass, kept for
+    /// emission.
+    pub(crate) setter_arguments: SetterArguments,
     str_lits: HashMap<String, u32>,
     /// Call graph edges between user POUs, recorded for the recursion rule
     /// ([`crate::sema::body`]).
@@ -242,6 +245,7 @@ impl<'a> Gen<'a> {
             conversion_arguments: ConversionArguments::default(),
             operations: Operations::default(),
             properties: Properties::default(),
+            setter_arguments: SetterArguments::default(),
             str_lits: HashMap::new(),
             calls: Vec::new(),
             frames: Vec::new(),

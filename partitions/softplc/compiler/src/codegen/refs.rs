@@ -150,7 +150,7 @@ impl Gen<'_> {
     /// address). `expected` is the reference type the context wants: a byte pointer
     /// (`REF_TO BYTE`, `POINTER TO ARRAY[..] OF BYTE`, ...) made from a STRING points at its
     /// text.
-    fn make_reference(&mut self, arg: &Expr, expected: Option<&Type>) -> Type {
+    pub(crate) fn make_reference(&mut self, arg: &Expr, expected: Option<&Type>) -> Type {
         let root = self.root_of(arg);
         let Some(p) = self.place(arg) else {
             return Type::Error;

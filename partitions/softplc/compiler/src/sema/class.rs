@@ -12,12 +12,12 @@
 //! method's frame layout) is looked up by the code generator's helpers, one for both
 //! passes.
 
-use crate::ast::{Arg, Expr, ExprKind, Ident, Init, VarKind};
-use crate::codegen::{Dynamic, Gen, Loc, Place, scalar_mem, setter_arguments};
+use crate::ast::{Arg, Expr, ExprKind, Ident, VarKind};
+use crate::codegen::{Dynamic, Gen, Loc, Place, scalar_mem};
 use crate::codes;
 use crate::diagnostics::Span;
 use crate::sema::call::{bind, in_out_argument, input_value, output, static_call};
-use crate::sema::expr::{check, value_to};
+use crate::sema::expr::check;
 use crate::sema::place::place;
 use crate::sema::{Access, Member, MemberKind};
 use crate::typed::{Accessor, Bare, Method, PropertyAccess, Receiver};
@@ -184,16 +184,14 @@ fn dynamic_call(g: &mut Gen, base: Option<&Expr>, d: Dynamic, args: &[Arg], span
             _ => input_value(g, a.value, &a.param.ty, Some("an input of a method")),
         }
     }
-    // An unconnected input's declared initial value is converted where the call gives it.
+    // An unconnected input starts with its declared initial value, which the call gives.
     for v in &d.params {
         if v.kind == VarKind::Input
             && !bound.iter().any(|b| b.param.name == v.name)
-            && !matches!(v.ty, Type::String(_))
             && scalar_mem(&v.ty).is_some()
-            && let Some(Init::Expr(e)) = &v.init
+            && !g.dry
         {
-            let (t, e) = (v.ty.clone(), e.clone());
-            value_to(g, &e, &t);
+            g.default_cell(v);
         }
     }
     for a in bound.iter().filter(|a| a.output) {
@@ -364,14 +362,14 @@ pub(crate) fn property_write(g: &mut Gen, target: &Expr, value: &Expr) -> bool {
     let Some((base, property, name)) = property_target(g, target) else {
         return false;
     };
-    let args = setter_arguments(value);
+    let args = g.setter_arguments(value);
     accessor_call(
         g,
         base,
         &property,
         name,
         MemberKind::Setter,
-        &args,
+        &args[..],
         target.span,
     );
     true

@@ -16,7 +16,7 @@
 //! infer its type ([`Gen::infer`]); such a walk records only what no real walk has, as the
 //! type its context expects may differ.
 
-use crate::ast::{Arg, BinOp, Expr, ExprKind, Ident, UnOp};
+use crate::ast::{BinOp, Expr, ExprKind, Ident, UnOp};
 use crate::codegen::Gen;
 use crate::codes::{self, Code};
 use crate::diagnostics::Span;
@@ -542,29 +542,12 @@ pub(crate) fn value_to(g: &mut Gen, e: &Expr, to: &Type) {
         if matches!(e.kind, ExprKind::Null) {
             return;
         }
-        let (id, args) = reference_binding(e);
-        let t = g.ref_function(&id, &args, Some(&as_ref), e.span);
+        let t = g.make_reference(e, Some(&as_ref));
         coerce(g, &t, &as_ref, e);
         return;
     }
     let t = check(g, e, Some(to));
     coerce(g, &t, to, e);
-}
-
-/// The call `REF(e)` that binds `e` to a `REFERENCE TO` parameter.
-pub(crate) fn reference_binding(e: &Expr) -> (Ident, [Arg; 1]) {
-    let id = Ident {
-        name: "REF".into(),
-        text: "REF".into(),
-        span: e.span,
-    };
-    let args = [Arg {
-        name: None,
-        output: false,
-        value: e.clone(),
-        span: e.span,
-    }];
-    (id, args)
 }
 
 /// Decides what the value `e` of type `from` takes where `to` is wanted
