@@ -109,6 +109,21 @@ pub type ExprTypes = ExprTable<Type>;
 /// at most one).
 pub type Operations = ExprTable<Operation>;
 
+/// A variable whose address a program takes: what the object table must list.
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+pub enum Root {
+    /// A global variable (upper-case name).
+    Global(String),
+    /// A variable of a POU (in every instance or frame of it).
+    Var(usize, String),
+    /// A `VAR_IN_OUT` parameter of a POU: the caller's variable.
+    InOut(usize, String),
+}
+
+/// The variable each `REF()`/`ADR()` argument and each VAR_IN_OUT argument is part of
+/// (none where it is reached through a reference, whose object already bounds it).
+pub type Roots = ExprTable<Root>;
+
 /// The argument list a property write passes to its SET accessor, keyed by the value
 /// written: made once, by the checker, so that emission walks the very expressions whose
 /// records the checker left (the records are keyed by the expressions' addresses).
@@ -366,6 +381,8 @@ pub struct Checked {
     pub case_labels: CaseLabels,
     /// The argument list of every property write.
     pub setter_arguments: SetterArguments,
+    /// The variable every `REF()`/`ADR()` and VAR_IN_OUT argument is part of.
+    pub roots: Roots,
     /// The calls between user POUs (the call graph the recursion rule is judged on).
     pub calls: Vec<CallEdge>,
 }
@@ -397,6 +414,7 @@ pub fn check(
         operations: std::mem::take(&mut checker.operations),
         properties: std::mem::take(&mut checker.properties),
         setter_arguments: std::mem::take(&mut checker.setter_arguments),
+        roots: std::mem::take(&mut checker.roots),
     };
     drop(checker);
     body::check_recursion(prog, &checked.calls, diags);
@@ -437,6 +455,7 @@ pub fn emit(
     generator.operations = checked.operations;
     generator.properties = checked.properties;
     generator.setter_arguments = checked.setter_arguments;
+    generator.roots = checked.roots;
     generator.generate();
     let emitted = Emitted {
         builder: std::mem::take(&mut generator.b),

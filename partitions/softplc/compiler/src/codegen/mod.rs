@@ -29,7 +29,7 @@ mod ops;
 mod place;
 pub(crate) use place::element_offsets;
 mod refs;
-pub(crate) use refs::reference_to;
+pub(crate) use refs::PointerOperation;
 mod stdfuncs;
 mod stmt;
 mod strings;
@@ -45,7 +45,7 @@ use crate::diagnostics::{Diagnostics, SourceMap, Span};
 use crate::sema::{ConstScope, ConstVal, Program, VarDef, const_eval};
 use crate::typed::{
     Bare, BareNames, Bindings, Callees, CaseLabels, Coercions, ConversionArguments, ExprTypes,
-    GenericTypes, Members, Operations, Properties, SetterArguments, StdArguments, Variables,
+    GenericTypes, Members, Operations, Properties, Roots, SetterArguments, StdArguments, Variables,
 };
 use crate::types::*;
 
@@ -182,6 +182,9 @@ pub(crate) struct Gen<'a> {
     /// The argument list of each property write: made by the checking pass, kept for
     /// emission.
     pub(crate) setter_arguments: SetterArguments,
+    /// The variable each `REF()`/`ADR()` and VAR_IN_OUT argument is part of: found by the
+    /// checking pass, read by emission (for the object table).
+    pub(crate) roots: Roots,
     str_lits: HashMap<String, u32>,
     /// Call graph edges between user POUs, recorded for the recursion rule
     /// ([`crate::sema::body`]).
@@ -246,6 +249,7 @@ impl<'a> Gen<'a> {
             operations: Operations::default(),
             properties: Properties::default(),
             setter_arguments: SetterArguments::default(),
+            roots: Roots::default(),
             str_lits: HashMap::new(),
             calls: Vec::new(),
             frames: Vec::new(),
@@ -515,8 +519,8 @@ impl<'a> Gen<'a> {
         self.return_label = Some(ret);
         let body = source.body;
         self.scan_byte_views(body);
-        self.scan_temporary_references(body);
         if self.check_only {
+            crate::sema::refs::scan_temporary_references(self, body);
             crate::sema::stmt::check_body(self, body);
         } else {
             self.stmts(body);

@@ -22,7 +22,6 @@
 //! Never here: an integer becoming a reference (an address could name any variable; only
 //! `REF()`/`ADR()` and arithmetic on a reference make references).
 
-use crate::codes;
 use std::collections::HashSet;
 
 use plc_vm::isa::{Builtin, Opcode};
@@ -32,18 +31,8 @@ use crate::codegen::{Gen, Loc, Place};
 use crate::diagnostics::Span;
 use crate::sema::align_up;
 use crate::sema::expr::{has_real_literal, is_byte_view, is_flexible, is_plain};
+use crate::typed::Root;
 use crate::types::*;
-
-/// A variable whose address a program takes: what the object table must list.
-#[derive(Debug, Clone, PartialEq, Eq, Hash)]
-pub(crate) enum Root {
-    /// A global variable (upper-case name).
-    Global(String),
-    /// A variable of a POU (in every instance or frame of it).
-    Var(usize, String),
-    /// A `VAR_IN_OUT` parameter of a POU: the caller's variable.
-    InOut(usize, String),
-}
 
 /// What code generation learns about references (see [`Gen::build_objects`]).
 #[derive(Debug, Default)]
@@ -59,21 +48,45 @@ pub(crate) struct RefState {
     /// dereferenced.
     pub(crate) keep_reference: bool,
     /// Temporary variables of the POU being compiled that may hold a reference to its
-    /// temporary storage (see [`Gen::check_escape`]).
-    tainted: HashSet<String>,
+    /// temporary storage (see [`crate::sema::refs::check_escape`]).
+    pub(crate) tainted: HashSet<String>,
     /// ... or one of a FUNCTION's borrowed reference inputs.
-    borrowed: HashSet<String>,
+    pub(crate) borrowed: HashSet<String>,
 }
 
-/// Where a reference value may point, for the checks of references to temporaries.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
-enum Taint {
-    /// Nowhere temporary.
-    None,
-    /// Into what the caller of the current FUNCTION passed (its reference inputs).
-    Borrowed,
-    /// Into the current POU's temporary storage.
-    Local,
+/// An operation on references or addresses, by the types of its operands (`None`: an
+/// untyped integer literal, which takes the other operand's part: an offset or an address).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum PointerOperation {
+    /// `ref + n`, `n + ref`, `ref - n`: the address moves by n bytes, as CODESYS does.
+    Move { reference_first: bool },
+    /// `ref - ref`: the distance in bytes.
+    Distance,
+    /// A comparison of references, interface values and addresses (by address; `NULL` and
+    /// 0 are the address 0).
+    Compare,
+}
+
+impl PointerOperation {
+    /// The operation `op` is on operands of types `ta` and `tb` ([`Gen::pointer_operand_type`]);
+    /// `None` when references allow no such operation.
+    pub(crate) fn of(op: BinOp, ta: &Option<Type>, tb: &Option<Type>) -> Option<Self> {
+        let is_ref = |t: &Option<Type>| matches!(t, Some(Type::Ref(_)));
+        match op {
+            BinOp::Add | BinOp::Sub
+                if is_ref(ta) && !is_ref(tb) || op == BinOp::Add && is_ref(tb) && !is_ref(ta) =>
+            {
+                Some(PointerOperation::Move {
+                    reference_first: is_ref(ta),
+                })
+            }
+            BinOp::Sub if is_ref(ta) && is_ref(tb) => Some(PointerOperation::Distance),
+            BinOp::Eq | BinOp::Ne | BinOp::Lt | BinOp::Le | BinOp::Gt | BinOp::Ge => {
+                Some(PointerOperation::Compare)
+            }
+            _ => None,
+        }
+    }
 }
 
 /// Deepest object nesting the VM accepts (`plc_vm::image::MAX_OBJECT_DEPTH`).
@@ -99,7 +112,8 @@ impl Gen<'_> {
         matches!(name, "REF" | "ADR" | "__ISVALIDREF")
     }
 
-    /// `REF(x)`, `ADR(x)`, `__ISVALIDREF(r)`.
+    /// `REF(x)`, `ADR(x)`, `__ISVALIDREF(r)`, as the checker passed them
+    /// ([`crate::sema::refs::ref_function`]).
     pub(crate) fn ref_function(
         &mut self,
         id: &Ident,
@@ -107,51 +121,29 @@ impl Gen<'_> {
         expected: Option<&Type>,
         span: Span,
     ) -> Type {
-        if self.check_only && (args.len() != 1 || args[0].name.is_some() || args[0].output) {
-            self.error(
-                codes::ARGUMENT_COUNT,
-                span,
-                format!("{} takes one argument", id.text),
-            );
-            for a in args {
-                self.infer(&a.value);
-            }
+        let [arg] = args else {
+            self.missing_record(span, "passed a reference function without one argument");
             return Type::Error;
+        };
+        let arg = &arg.value;
+        if id.name != "__ISVALIDREF" {
+            return self.make_reference(arg, expected);
         }
-        let arg = &args[0].value;
-        match id.name.as_str() {
-            "__ISVALIDREF" => {
-                let saved = std::mem::replace(&mut self.refs.keep_reference, true);
-                let t = self.expr(arg, None);
-                self.refs.keep_reference = saved;
-                if self.check_only
-                    && !matches!(
-                        t,
-                        Type::Ref(_) | Type::Reference(_) | Type::Interface(_) | Type::Error
-                    )
-                {
-                    let msg = format!(
-                        "__ISVALIDREF needs a reference or interface, found {}",
-                        self.tname(&t)
-                    );
-                    self.error(codes::REF_OPERAND, arg.span, msg);
-                }
-                self.emit(|b| {
-                    b.push_i32(0);
-                    b.op(Opcode::Ne);
-                });
-                Type::BOOL
-            }
-            _ => self.make_reference(arg, expected),
-        }
+        let saved = std::mem::replace(&mut self.refs.keep_reference, true);
+        self.expr(arg, None);
+        self.refs.keep_reference = saved;
+        self.emit(|b| {
+            b.push_i32(0);
+            b.op(Opcode::Ne);
+        });
+        Type::BOOL
     }
 
     /// `REF(x)` / `ADR(x)`: a reference to variable `x` (for a function-block instance, its
-    /// address). `expected` is the reference type the context wants: a byte pointer
-    /// (`REF_TO BYTE`, `POINTER TO ARRAY[..] OF BYTE`, ...) made from a STRING points at its
-    /// text.
+    /// address). `expected` is the reference type the context wants: a byte pointer made
+    /// from a STRING points at its text ([`crate::sema::refs::make_reference`]).
     pub(crate) fn make_reference(&mut self, arg: &Expr, expected: Option<&Type>) -> Type {
-        let root = self.root_of(arg);
+        let root = self.roots.of(arg).cloned();
         let Some(p) = self.place(arg) else {
             return Type::Error;
         };
@@ -165,14 +157,6 @@ impl Gen<'_> {
                 self.addr_of(&p);
                 Type::Ref(Box::new(Type::Fb(pi)))
             }
-            Type::Array(a) if self.check_only && self.holds_instances(&a.elem) => {
-                self.error(codes::REF_OPERAND,
-                    arg.span,
-                    "REF()/ADR() of an array of function block instances is not supported; take the address of one element",
-                );
-                self.drop_loaded(&p);
-                Type::Error
-            }
             Type::String(n) => {
                 let n = *n;
                 let view = match expected {
@@ -183,20 +167,12 @@ impl Gen<'_> {
                 self.addr_of(&p);
                 match view {
                     Some(target) => {
-                        match &arg.kind {
-                            // Not found by the scan (e.g. inside an expression the scan
-                            // does not see): still consistent from here on.
-                            ExprKind::Name(v) if !self.refs.byte_viewed.contains(&v.name) => {
-                                self.refs.byte_viewed.push(v.name.clone());
-                            }
-                            ExprKind::Name(_) => {}
-                            _ if self.check_only => {
-                                self.error(codes::REF_OPERAND,
-                                    arg.span,
-                                    "a byte pointer to the text of a STRING can be taken of a STRING variable or parameter only (its length is re-read from the terminator there)",
-                                );
-                            }
-                            _ => {}
+                        // Not found by the scan (e.g. inside an expression the scan does
+                        // not see): still consistent from here on.
+                        if let ExprKind::Name(v) = &arg.kind
+                            && !self.refs.byte_viewed.contains(&v.name)
+                        {
+                            self.refs.byte_viewed.push(v.name.clone());
                         }
                         self.emit(|b| {
                             b.push_i32(4);
@@ -228,56 +204,17 @@ impl Gen<'_> {
         }
     }
 
-    /// Whether `ty` is or contains function-block instances.
-    fn holds_instances(&self, ty: &Type) -> bool {
-        match ty {
-            Type::Fb(_) => true,
-            Type::Array(a) => self.holds_instances(&a.elem),
-            _ => false,
-        }
-    }
-
     fn record_root(&mut self, root: Option<Root>) {
         if let Some(r) = root {
             self.refs.roots.push(r);
         }
     }
 
-    /// Records a `VAR_IN_OUT` argument (for the object table).
+    /// Records a `VAR_IN_OUT` argument (for the object table): the variable it is part of,
+    /// as the checker found it ([`crate::typed::Roots`]).
     pub(crate) fn record_inout(&mut self, callee: usize, param: &str, arg: &Expr) {
-        if self.dry {
-            return;
-        }
-        if let Some(root) = self.root_of(arg) {
+        if let Some(root) = self.roots.of(arg).cloned() {
             self.refs.inout_args.push((callee, param.to_string(), root));
-        }
-    }
-
-    /// The variable a place expression is part of (`None` when it is reached through a
-    /// reference, whose object already bounds it).
-    pub(crate) fn root_of(&mut self, e: &Expr) -> Option<Root> {
-        match &e.kind {
-            ExprKind::Name(n) => {
-                if let Some(v) = self.prog.pous[self.cur].var(&n.name) {
-                    return Some(match v.kind {
-                        VarKind::External => Root::Global(n.name.clone()),
-                        VarKind::InOut => Root::InOut(self.cur, n.name.clone()),
-                        _ => Root::Var(self.cur, n.name.clone()),
-                    });
-                }
-                if let Some(owner) = self.var_owner(&n.name) {
-                    return Some(Root::Var(owner, n.name.clone()));
-                }
-                self.prog
-                    .global(&n.name)
-                    .map(|_| Root::Global(n.name.clone()))
-            }
-            ExprKind::Member(base, m) => match self.infer(base) {
-                Type::Fb(pi) => Some(Root::Var(pi, m.name.clone())),
-                _ => self.root_of(base),
-            },
-            ExprKind::Index(base, _) => self.root_of(base),
-            _ => None,
         }
     }
 
@@ -376,7 +313,7 @@ impl Gen<'_> {
 
     /// The type of an operand of a reference operation; `None` for an untyped integer
     /// literal (it takes the other operand's part: an offset or an address).
-    fn pointer_operand_type(&mut self, e: &Expr) -> Option<Type> {
+    pub(crate) fn pointer_operand_type(&mut self, e: &Expr) -> Option<Type> {
         if is_flexible(e) && !has_real_literal(e) {
             None
         } else {
@@ -394,9 +331,8 @@ impl Gen<'_> {
         pointerish(&ta) || pointerish(&tb)
     }
 
-    /// Pointer arithmetic (`ref + n`, `n + ref`, `ref - n`: the address moves by n bytes, as
-    /// CODESYS does; `ref - ref`: the distance in bytes) and comparisons of references,
-    /// interface values and addresses (by address; `NULL` and 0 are the address 0).
+    /// Emits an operation on references or addresses ([`PointerOperation`]), as the checker
+    /// passed it ([`crate::sema::refs::pointer_binary`]).
     pub(crate) fn pointer_binary(
         &mut self,
         op: BinOp,
@@ -405,29 +341,28 @@ impl Gen<'_> {
         expected: Option<&Type>,
         span: Span,
     ) -> Type {
-        let ta = self.pointer_operand_type(a);
-        let tb = self.pointer_operand_type(b);
-        let is_ref = |t: &Option<Type>| matches!(t, Some(Type::Ref(_)));
+        let (ta, tb) = (self.pointer_operand_type(a), self.pointer_operand_type(b));
         let ref_expected = expected.filter(|t| matches!(t, Type::Ref(_)));
-        match op {
-            BinOp::Add | BinOp::Sub
-                if is_ref(&ta) && !is_ref(&tb)
-                    || op == BinOp::Add && is_ref(&tb) && !is_ref(&ta) =>
-            {
-                let ref_first = is_ref(&ta);
-                let (r, n) = if ref_first { (a, b) } else { (b, a) };
-                if ref_first {
-                    let rt = self.expr(r, ref_expected);
-                    self.offset_operand(n);
-                    self.finish_pointer_arithmetic(op, rt, span)
+        match PointerOperation::of(op, &ta, &tb) {
+            Some(PointerOperation::Move { reference_first }) => {
+                let rt = if reference_first {
+                    let rt = self.expr(a, ref_expected);
+                    self.expr(b, Some(&Type::LINT));
+                    rt
                 } else {
-                    self.offset_operand(n);
-                    let rt = self.expr(r, ref_expected);
+                    self.expr(a, Some(&Type::LINT));
+                    let rt = self.expr(b, ref_expected);
                     self.op(Opcode::Swap);
-                    self.finish_pointer_arithmetic(op, rt, span)
+                    rt
+                };
+                // `[ref n] -> [ref ± n]`
+                if op == BinOp::Sub {
+                    self.op(Opcode::Neg);
                 }
+                self.op(Opcode::RefAdd);
+                rt
             }
-            BinOp::Sub if is_ref(&ta) && is_ref(&tb) => {
+            Some(PointerOperation::Distance) => {
                 self.address_operand(a);
                 self.address_operand(b);
                 self.emit(|bb| {
@@ -436,10 +371,9 @@ impl Gen<'_> {
                 });
                 Type::DINT
             }
-            BinOp::Eq | BinOp::Ne | BinOp::Lt | BinOp::Le | BinOp::Gt | BinOp::Ge => {
-                for e in [a, b] {
-                    self.address_operand(e);
-                }
+            Some(PointerOperation::Compare) => {
+                self.address_operand(a);
+                self.address_operand(b);
                 self.op(match op {
                     BinOp::Eq => Opcode::Eq,
                     BinOp::Ne => Opcode::Ne,
@@ -450,59 +384,10 @@ impl Gen<'_> {
                 });
                 Type::BOOL
             }
-            _ => {
-                let name = |g: &mut Self, t: &Option<Type>| match t {
-                    Some(t) => g.tname(t),
-                    None => "an integer".into(),
-                };
-                let msg = format!(
-                    "operator {} cannot be applied to {} and {} (references allow `+`/`-` of a byte offset, the difference of two references and comparisons)",
-                    op.symbol(),
-                    name(self, &ta),
-                    name(self, &tb)
-                );
-                self.error(codes::POINTER_ARITHMETIC, span, msg);
+            None => {
+                self.missing_record(span, "passed an operation references do not allow");
                 Type::Error
             }
-        }
-    }
-
-    /// `[ref n] -> [ref ± n]` after checking the reference may be moved.
-    fn finish_pointer_arithmetic(&mut self, op: BinOp, rt: Type, span: Span) -> Type {
-        if op == BinOp::Sub {
-            self.op(Opcode::Neg);
-        }
-        self.op(Opcode::RefAdd);
-        match &rt {
-            Type::Ref(target) if self.check_only && !is_plain(self.prog, target) => {
-                let msg = format!(
-                    "pointer arithmetic on {} is not allowed: it could reach a reference or instance stored there (only references to plain data can be moved)",
-                    self.tname(&rt)
-                );
-                self.error(codes::POINTER_ARITHMETIC, span, msg);
-                Type::Error
-            }
-            Type::Ref(_) | Type::Error => rt,
-            other => {
-                let msg = format!(
-                    "pointer arithmetic needs a reference, found {}",
-                    self.tname(other)
-                );
-                self.error(codes::POINTER_ARITHMETIC, span, msg);
-                Type::Error
-            }
-        }
-    }
-
-    /// An integer byte offset for pointer arithmetic.
-    fn offset_operand(&mut self, e: &Expr) {
-        let t = self.expr(e, Some(&Type::LINT));
-        if self.check_only && !t.is_error() && !t.elem().is_some_and(|x| x.is_integral()) {
-            let msg = format!(
-                "a reference moves by an integer number of bytes, not by {}",
-                self.tname(&t)
-            );
-            self.error(codes::POINTER_ARITHMETIC, e.span, msg);
         }
     }
 
@@ -510,197 +395,11 @@ impl Gen<'_> {
     /// an instance or interface value (already an address) or an integer.
     fn address_operand(&mut self, e: &Expr) {
         let t = self.expr(e, Some(&Type::ULINT));
-        match &t {
-            Type::Ref(target) if !matches!(**target, Type::Fb(_)) => {
-                self.emit(|b| b.op_width(Opcode::Zext, 32))
-            }
-            Type::Ref(_) | Type::Interface(_) | Type::Null | Type::Fb(_) | Type::Error => {}
-            t if t.elem().is_some_and(|x| x.is_integral()) => {}
-            other => {
-                let msg = format!(
-                    "a reference can be compared with a reference, an interface or an address, not with {}",
-                    self.tname(other)
-                );
-                self.error(codes::REFERENCE_COMPARISON, e.span, msg);
-            }
-        }
-    }
-
-    // ----- references to temporary storage -------------------------------------------------
-    //
-    // Every variable has a static home in this VM, so no reference can ever dangle into
-    // freed memory; but a FUNCTION's (or METHOD's) variables and a VAR_TEMP are re-initialised
-    // by the next call, so a reference to them that outlives the call would silently see
-    // another call's data. The compiler rejects the ways such a reference can leave the call:
-    // stored anywhere but in a temporary variable of the same POU (a global, a variable of an
-    // instance, an output or the function's result, through a dereference or a VAR_IN_OUT),
-    // or passed to a FUNCTION_BLOCK or METHOD input (which may keep it). Passing it to a
-    // FUNCTION input is allowed: a FUNCTION's reference inputs are *borrowed* in turn: the
-    // function may return them (as its result or an output) but not keep them, and its
-    // caller treats the result as derived from the references it passed in. Temporary
-    // reference variables that are assigned such a reference anywhere in the POU count as
-    // holding one everywhere.
-
-    /// Whether `name` is temporary storage of the current POU.
-    fn is_temporary_var(&self, name: &str) -> bool {
-        let pou = &self.prog.pous[self.cur];
-        let Some(v) = pou.var(name) else {
-            return false;
-        };
-        let function_like = matches!(pou.kind, PouKind::Function) || self.is_method(self.cur);
-        let is_result =
-            pou.return_type.is_some() && pou.vars.first().is_some_and(|r| r.name == v.name);
-        match v.kind {
-            VarKind::Temp => true,
-            VarKind::Local | VarKind::Input => function_like && !is_result,
-            _ => false,
-        }
-    }
-
-    /// Whether `name` is what a FUNCTION hands back to its caller: its result or an output.
-    fn is_function_output(&self, name: &str) -> bool {
-        let pou = &self.prog.pous[self.cur];
-        pou.kind == PouKind::Function
-            && !self.is_method(self.cur)
-            && pou.var(name).is_some_and(|v| v.kind == VarKind::Output)
-    }
-
-    /// Whether `e` may evaluate to a reference to temporary storage of the current POU
-    /// (`Local`), or to one of a FUNCTION's borrowed reference inputs (`Borrowed`).
-    fn temp_derived(&mut self, e: &Expr) -> Taint {
-        match &e.kind {
-            ExprKind::Call { callee, args } => {
-                let ExprKind::Name(f) = &callee.kind else {
-                    return Taint::None;
-                };
-                if matches!(f.name.as_str(), "REF" | "ADR") {
-                    return match args.as_slice() {
-                        [a] if self.place_is_temporary(&a.value) => Taint::Local,
-                        [a] => self.deref_taint(&a.value),
-                        _ => Taint::None,
-                    };
-                }
-                // A function's result may be one of the references passed to it.
-                let Some(&pi) = self.prog.pou_by_name.get(&f.name) else {
-                    return Taint::None;
-                };
-                if self.prog.pous[pi].kind != PouKind::Function {
-                    return Taint::None;
-                }
-                args.iter()
-                    .filter(|a| !a.output)
-                    .map(|a| self.temp_derived(&a.value))
-                    .max()
-                    .unwrap_or(Taint::None)
-            }
-            ExprKind::Name(n) => {
-                if self.refs.tainted.contains(&n.name) {
-                    return Taint::Local;
-                }
-                if self.refs.borrowed.contains(&n.name) {
-                    return Taint::Borrowed;
-                }
-                // A FUNCTION's reference inputs, and a reference read from any POU's
-                // VAR_IN_OUT, may point to the caller's temporaries.
-                let pou = &self.prog.pous[self.cur];
-                let function = pou.kind == PouKind::Function && !self.is_method(self.cur);
-                let borrowed = pou.var(&n.name).is_some_and(|v| {
-                    matches!(v.ty, Type::Ref(_) | Type::Interface(_))
-                        && (v.kind == VarKind::InOut || function && v.kind == VarKind::Input)
-                });
-                if borrowed {
-                    Taint::Borrowed
-                } else {
-                    Taint::None
-                }
-            }
-            ExprKind::Binary(BinOp::Add | BinOp::Sub, a, b) => {
-                self.temp_derived(a).max(self.temp_derived(b))
-            }
-            _ => Taint::None,
-        }
-    }
-
-    /// The taint of the reference a place expression is reached through, if any.
-    fn deref_taint(&mut self, e: &Expr) -> Taint {
-        match &e.kind {
-            ExprKind::Member(b, _) | ExprKind::Index(b, _) => self.deref_taint(b),
-            ExprKind::Deref(r) => self.temp_derived(r),
-            _ => Taint::None,
-        }
-    }
-
-    /// Whether place expression `e` lies in temporary storage of the current POU.
-    fn place_is_temporary(&mut self, e: &Expr) -> bool {
-        match &e.kind {
-            ExprKind::Name(n) => self.is_temporary_var(&n.name),
-            ExprKind::Member(b, _) | ExprKind::Index(b, _) => self.place_is_temporary(b),
-            ExprKind::Deref(r) => self.temp_derived(r) == Taint::Local,
-            _ => false,
-        }
-    }
-
-    /// Finds the temporary reference variables of the current POU that may hold a reference
-    /// to its temporary storage or a borrowed one (assignments anywhere in `body`, to a
-    /// fixpoint).
-    pub(crate) fn scan_temporary_references(&mut self, body: &[Stmt]) {
-        self.refs.tainted.clear();
-        self.refs.borrowed.clear();
-        let mut assigns: Vec<(Ident, Expr)> = Vec::new();
-        for s in body {
-            collect_assignments(s, &mut assigns);
-        }
-        loop {
-            let mut changed = false;
-            for (target, value) in &assigns {
-                if !self.is_temporary_var(&target.name) {
-                    continue;
-                }
-                let taint = self.temp_derived(value);
-                let set = match taint {
-                    Taint::Local => &mut self.refs.tainted,
-                    Taint::Borrowed => &mut self.refs.borrowed,
-                    Taint::None => continue,
-                };
-                if set.insert(target.name.clone()) {
-                    changed = true;
-                }
-            }
-            if !changed {
-                break;
-            }
-        }
-    }
-
-    /// Rejects storing `value`, a reference that may point to temporary storage of the
-    /// current POU, into `target` (`None`: a destination that outlives the call, named by
-    /// `what`) unless `target` is itself temporary storage of this POU (or, for a borrowed
-    /// reference, the result or an output of the FUNCTION it was passed to).
-    pub(crate) fn check_escape(&mut self, target: Option<&Expr>, value: &Expr, what: &str) {
-        if self.dry {
-            return;
-        }
-        let taint = self.temp_derived(value);
-        if taint == Taint::None {
-            return;
-        }
-        if let Some(t) = target
-            && let ExprKind::Name(n) = &t.kind
-            && (self.is_temporary_var(&n.name)
-                || taint == Taint::Borrowed && self.is_function_output(&n.name))
+        if let Type::Ref(target) = &t
+            && !matches!(**target, Type::Fb(_))
         {
-            return;
+            self.emit(|b| b.op_width(Opcode::Zext, 32));
         }
-        let pou = self.prog.pous[self.cur].text.clone();
-        let msg = match taint {
-            Taint::Borrowed => format!(
-                "this reference came from the caller of `{pou}` (a FUNCTION's reference input or a VAR_IN_OUT) and may point to the caller's temporary variables; a FUNCTION may return it (as its result or an output) but it cannot be stored in {what}, which outlives the call"
-            ),
-            _ => format!(
-                "this reference may point to a temporary variable of `{pou}` (a FUNCTION's or METHOD's variables, a VAR_TEMP), which the next call re-initialises; it cannot be stored in {what}, which outlives the call"
-            ),
-        };
-        self.error(codes::REFERENCE_ESCAPE, value.span, msg);
     }
 
     // ----- STRING byte views ------------------------------------------------------------
@@ -850,30 +549,6 @@ impl Gen<'_> {
     }
 }
 
-/// The expression `REF(e)`.
-pub(crate) fn reference_to(e: &Expr) -> Expr {
-    let id = Ident {
-        name: "REF".into(),
-        text: "REF".into(),
-        span: e.span,
-    };
-    Expr {
-        kind: ExprKind::Call {
-            callee: Box::new(Expr {
-                kind: ExprKind::Name(id),
-                span: e.span,
-            }),
-            args: vec![Arg {
-                name: None,
-                output: false,
-                value: e.clone(),
-                span: e.span,
-            }],
-        },
-        span: e.span,
-    }
-}
-
 /// Pushes the spans of the object of type `ty` at `addr` (and of its parts).
 fn object_tree(
     prog: &crate::sema::Program,
@@ -947,55 +622,6 @@ fn walk_pou(
             object_tree(prog, base + v.offset, &v.ty, 0, out);
         }
         walk_instances(prog, marked, base + v.offset, &v.ty, out);
-    }
-}
-
-/// Every `name := value` / `name REF= value` to a plain variable in `s`.
-fn collect_assignments(s: &Stmt, out: &mut Vec<(Ident, Expr)>) {
-    let body = |b: &[Stmt], out: &mut Vec<(Ident, Expr)>| {
-        b.iter().for_each(|s| collect_assignments(s, out))
-    };
-    match &s.kind {
-        StmtKind::Assign { target, value } | StmtKind::RefAssign { target, value } => {
-            if let ExprKind::Name(n) = &target.kind {
-                out.push((n.clone(), value.clone()));
-            }
-        }
-        StmtKind::If {
-            branches,
-            else_body,
-        } => {
-            for (_, b) in branches {
-                body(b, out);
-            }
-            if let Some(b) = else_body {
-                body(b, out);
-            }
-        }
-        StmtKind::Case {
-            arms, else_body, ..
-        } => {
-            for a in arms {
-                body(&a.body, out);
-            }
-            if let Some(b) = else_body {
-                body(b, out);
-            }
-        }
-        StmtKind::For { body: b, .. }
-        | StmtKind::While { body: b, .. }
-        | StmtKind::Repeat { body: b, .. } => body(b, out),
-        StmtKind::Try {
-            body: b,
-            catch_body,
-            finally_body,
-            ..
-        } => {
-            body(b, out);
-            body(catch_body, out);
-            body(finally_body, out);
-        }
-        _ => {}
     }
 }
 

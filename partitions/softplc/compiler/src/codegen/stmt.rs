@@ -412,8 +412,7 @@ impl Gen<'_> {
         match &value.kind {
             ExprKind::Null | ExprKind::Int(0) => self.push_int(0),
             _ => {
-                let (id, args, _) = crate::sema::stmt::ref_call(value);
-                let rt = self.ref_function(&id, &args, Some(&Type::Ref(t.clone())), value.span);
+                let rt = self.make_reference(value, Some(&Type::Ref(t.clone())));
                 self.coerce(&rt, &Type::Ref(t), value);
             }
         }

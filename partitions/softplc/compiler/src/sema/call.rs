@@ -20,6 +20,7 @@ use crate::diagnostics::Span;
 use crate::sema::VarDef;
 use crate::sema::expr::{check, coerce, value_to};
 use crate::sema::place::place;
+use crate::sema::refs::{check_escape, record_in_out_root, reference_to};
 use crate::typed::{Binding, Callee};
 use crate::types::Type;
 
@@ -38,7 +39,7 @@ pub(crate) fn call(
     };
     g.callees.record(callee, target.clone());
     match &target {
-        Callee::RefFunction(n) => g.ref_function(n, args, expected, span),
+        Callee::RefFunction(n) => crate::sema::refs::ref_function(g, n, args, expected, span),
         Callee::Method(method) => crate::sema::class::method_call(g, method, callee, args, span),
         Callee::Function(pi) => static_call(g, *pi, args, span),
         Callee::Standard(n) => {
@@ -188,7 +189,7 @@ fn instance_body_call(g: &mut Gen, inst: &Place, pi: usize, args: &[Arg], span: 
     let bound = bind_args(g, pi, args, span);
     for a in bound.iter().filter(|a| !a.output) {
         if a.param.kind == VarKind::InOut {
-            g.record_inout(pi, &a.param.name, a.value);
+            record_in_out_root(g, a.value);
             in_out_argument(g, a.value, &a.param.ty);
             continue;
         }
@@ -199,11 +200,11 @@ fn instance_body_call(g: &mut Gen, inst: &Place, pi: usize, args: &[Arg], span: 
             window: None,
         };
         if p.ty.is_pointer_like() {
-            g.check_escape(None, a.value, "an input of a function block instance");
+            check_escape(g, None, a.value, "an input of a function block instance");
         }
         if matches!(p.ty, Type::Reference(_)) {
-            let r = crate::codegen::reference_to(a.value);
-            g.check_escape(None, &r, "an input of a function block instance");
+            let r = reference_to(a.value);
+            check_escape(g, None, &r, "an input of a function block instance");
         }
         crate::sema::stmt::check_store(g, &p, a.value, a.value.span);
     }
@@ -226,7 +227,7 @@ pub(crate) fn static_call(g: &mut Gen, pi: usize, args: &[Arg], span: Span) -> T
     for a in bound.iter().filter(|a| !a.output) {
         match a.param.kind {
             VarKind::InOut => {
-                g.record_inout(pi, &a.param.name, a.value);
+                record_in_out_root(g, a.value);
                 in_out_argument(g, a.value, &a.param.ty)
             }
             _ => input_value(g, a.value, &a.param.ty, None),
@@ -407,7 +408,7 @@ pub(crate) fn input_value(g: &mut Gen, e: &Expr, ty: &Type, kept_by: Option<&str
             if let Some(keeper) = kept_by
                 && ty.is_pointer_like()
             {
-                g.check_escape(None, e, keeper);
+                check_escape(g, None, e, keeper);
             }
             value_to(g, e, ty);
         }

@@ -19,6 +19,7 @@ use crate::diagnostics::Span;
 use crate::sema::call::{bind, in_out_argument, input_value, output, static_call};
 use crate::sema::expr::check;
 use crate::sema::place::place;
+use crate::sema::refs::record_in_out_root;
 use crate::sema::{Access, Member, MemberKind};
 use crate::typed::{Accessor, Bare, Method, PropertyAccess, Receiver};
 use crate::types::Type;
@@ -176,9 +177,7 @@ fn dynamic_call(g: &mut Gen, base: Option<&Expr>, d: Dynamic, args: &[Arg], span
     for a in bound.iter().filter(|b| !b.output) {
         match a.param.kind {
             VarKind::InOut => {
-                for &t in &d.targets {
-                    g.record_inout(t, &a.param.name, a.value);
-                }
+                record_in_out_root(g, a.value);
                 in_out_argument(g, a.value, &a.param.ty)
             }
             _ => input_value(g, a.value, &a.param.ty, Some("an input of a method")),

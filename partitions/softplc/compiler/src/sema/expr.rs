@@ -285,7 +285,7 @@ pub(crate) fn binary(
     span: Span,
 ) -> Type {
     if g.is_pointer_operation(a, b) {
-        return g.pointer_binary(op, a, b, expected, span);
+        return crate::sema::refs::pointer_binary(g, op, a, b, expected, span);
     }
     let (ta, tb) = operand_types(g, a, b, expected);
     if ta.is_error() || tb.is_error() {
@@ -542,7 +542,7 @@ pub(crate) fn value_to(g: &mut Gen, e: &Expr, to: &Type) {
         if matches!(e.kind, ExprKind::Null) {
             return;
         }
-        let t = g.make_reference(e, Some(&as_ref));
+        let t = crate::sema::refs::make_reference(g, e, Some(&as_ref));
         coerce(g, &t, &as_ref, e);
         return;
     }

@@ -17,6 +17,7 @@ mod config;
 pub(crate) mod expr;
 pub mod ops;
 pub(crate) mod place;
+pub(crate) mod refs;
 pub mod stdfuncs;
 pub(crate) mod stmt;
 

@@ -17,11 +17,12 @@
 
 use plc_vm::isa::Trap;
 
-use crate::ast::{Arg, CaseArm, CaseLabel, Expr, ExprKind, Ident, Stmt, StmtKind};
+use crate::ast::{CaseArm, CaseLabel, Expr, ExprKind, Ident, Stmt, StmtKind};
 use crate::codegen::{Gen, Loc, Place};
 use crate::codes;
 use crate::diagnostics::Span;
 use crate::sema::ConstVal;
+use crate::sema::refs::{check_escape, make_reference, reference_to};
 use crate::types::Type;
 
 /// Checks the statements of the body of the POU `g` is at (`g` in its checking mode).
@@ -322,7 +323,7 @@ impl BodyChecker<'_, '_> {
             );
         }
         if p.ty.is_pointer_like() {
-            self.g.check_escape(Some(target), value, "this variable");
+            check_escape(self.g, Some(target), value, "this variable");
         }
         check_store(self.g, &p, value, target.span);
     }
@@ -351,36 +352,10 @@ impl BodyChecker<'_, '_> {
         if matches!(value.kind, ExprKind::Null | ExprKind::Int(0)) {
             return;
         }
-        let (id, args, as_ref) = ref_call(value);
-        self.g.check_escape(Some(target), &as_ref, "this variable");
+        let as_ref = reference_to(value);
+        check_escape(self.g, Some(target), &as_ref, "this variable");
         let ty = Type::Ref(t);
-        let rt = self.g.ref_function(&id, &args, Some(&ty), value.span);
+        let rt = make_reference(self.g, value, Some(&ty));
         self.g.coerce(&rt, &ty, value);
     }
-}
-
-/// `REF(value)`: the callee's name, the argument and the call, as a `REF=` binds its value.
-pub(crate) fn ref_call(value: &Expr) -> (Ident, [Arg; 1], Expr) {
-    let args = [Arg {
-        name: None,
-        output: false,
-        value: value.clone(),
-        span: value.span,
-    }];
-    let id = Ident {
-        name: "REF".into(),
-        text: "REF".into(),
-        span: value.span,
-    };
-    let call = Expr {
-        kind: ExprKind::Call {
-            callee: Box::new(Expr {
-                kind: ExprKind::Name(id.clone()),
-                span: value.span,
-            }),
-            args: args.to_vec(),
-        },
-        span: value.span,
-    };
-    (id, args, call)
 }
