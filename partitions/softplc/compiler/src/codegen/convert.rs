@@ -3,8 +3,7 @@
 
 use super::stdfuncs::*;
 use super::*;
-use crate::sema::expr::operand;
-use crate::sema::stdfuncs::{self as rules, ConversionArgument};
+use crate::sema::stdfuncs::ConversionArgument;
 
 impl Gen<'_> {
     /// `A_TO_B` conversions (and `TO_B` is not supported). Between numbers and bit strings
@@ -19,28 +18,13 @@ impl Gen<'_> {
         span: Span,
     ) -> Option<Type> {
         let (from, to) = name.split_once("_TO_")?;
-        let parse = |s: &str| -> Option<Type> {
-            match s {
-                "STRING" => Some(Type::String(DEFAULT_STRING_LEN)),
-                "WSTRING" => Some(Type::WString(DEFAULT_STRING_LEN)),
-                _ => Elem::from_name(s).map(Type::Elem),
-            }
-        };
-        let (Some(ft), Some(tt)) = (parse(from), parse(to)) else {
+        let (Some(ft), Some(tt)) = (Self::conversion_type(from), Self::conversion_type(to)) else {
             return None;
         };
-        if self.check_only && exprs.len() != 1 {
-            self.error(
-                codes::ARGUMENT_COUNT,
-                span,
-                format!("{} takes 1 argument, {} given", id.text, exprs.len()),
-            );
-            for e in exprs {
-                self.surface(e);
-            }
+        let &[arg] = exprs else {
+            self.missing_record(span, "passed a conversion without one argument");
             return Some(Type::Error);
-        }
-        let arg = exprs[0];
+        };
         match (&ft, &tt) {
             (Type::String(_), Type::String(_)) => {
                 self.string_arg(arg);
@@ -138,6 +122,15 @@ impl Gen<'_> {
         }
     }
 
+    /// The type a conversion's name calls `name` (`INT` of `INT_TO_REAL`).
+    pub(crate) fn conversion_type(name: &str) -> Option<Type> {
+        match name {
+            "STRING" => Some(Type::String(DEFAULT_STRING_LEN)),
+            "WSTRING" => Some(Type::WString(DEFAULT_STRING_LEN)),
+            _ => Elem::from_name(name).map(Type::Elem),
+        }
+    }
+
     /// Converts the STRING whose address is on the stack to `t` (STRING_TO_*).
     pub(super) fn convert_string_on_stack(&mut self, t: Elem) {
         if t.is_real() {
@@ -216,7 +209,7 @@ impl Gen<'_> {
             }
             (Type::Elem(f), Type::Elem(t)) => {
                 let (f, t) = (*f, *t);
-                let Some(route) = self.conversion_argument(id, (f, t), exprs) else {
+                let Some(route) = self.conversion_argument(id) else {
                     return Some(Type::Error);
                 };
                 match route {
@@ -233,54 +226,13 @@ impl Gen<'_> {
         }
     }
 
-    /// How the argument `exprs[0]` of the conversion `id` from `from` to `to` reaches
-    /// `from`: the checking pass decides it ([`rules::conversion_exists`],
-    /// [`rules::conversion_argument`]), reporting a conversion that does not exist or an
-    /// argument that does not fit, and records it ([`crate::typed::ConversionArguments`]);
-    /// emission reads the record. `None`: the call is in error.
-    fn conversion_argument(
-        &mut self,
-        id: &Ident,
-        (from, to): (Elem, Elem),
-        exprs: &[&Expr],
-    ) -> Option<ConversionArgument> {
-        if !self.check_only {
-            let route = self.conversion_arguments.of(self.cur, id).copied();
-            if route.is_none() {
-                self.missing_record(id.span, "decided no conversion for this argument");
-            }
-            return route;
+    /// How the argument of the conversion `id` reaches its source type, as the checker
+    /// decided it ([`crate::typed::ConversionArguments`]).
+    fn conversion_argument(&mut self, id: &Ident) -> Option<ConversionArgument> {
+        let route = self.conversion_arguments.of(self.cur, id).copied();
+        if route.is_none() {
+            self.missing_record(id.span, "decided no conversion for this argument");
         }
-        if !rules::conversion_exists(from, to) {
-            self.error(
-                codes::NO_CONVERSION,
-                id.span,
-                format!("there is no conversion from {from} to {to}"),
-            );
-            for e in exprs {
-                self.infer(e);
-            }
-            return None;
-        }
-        let arg = exprs[0];
-        let at = self.infer(arg);
-        if at.is_error() {
-            self.surface(arg);
-            return None;
-        }
-        let Some(route) = rules::conversion_argument(from, operand(arg, &at)) else {
-            let msg = format!(
-                "{} expects a {} argument, found {}",
-                id.text,
-                from,
-                self.tname(&at)
-            );
-            self.error(codes::TYPE_MISMATCH, arg.span, msg);
-            return None;
-        };
-        if !self.dry || self.conversion_arguments.of(self.cur, id).is_none() {
-            self.conversion_arguments.record(self.cur, id, route);
-        }
-        Some(route)
+        route
     }
 }

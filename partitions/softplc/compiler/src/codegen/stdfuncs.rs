@@ -5,21 +5,18 @@
 //! truncates; TIME<->number conversions count milliseconds; string results go to a static
 //! temporary per call site.
 
-use crate::codes;
 use plc_vm::isa::{Builtin, MemType, Opcode, RoundMode};
 
 use crate::ast::*;
-use crate::codegen::{Gen, Place};
+use crate::codegen::Gen;
 use crate::diagnostics::Span;
-use crate::sema::expr::{has_real_literal, is_flexible, operand};
-use crate::sema::stdfuncs as rules;
 use crate::types::*;
 
 /// A date and time function: the typed form of an operator (`ADD_TOD_TIME` is TOD + TIME;
 /// the second type of MUL/DIV stands for any number), CONCAT_DATE_TOD, CONCAT_* of numbers
 /// giving the type, SPLIT_* of the type into numbers, DAY_OF_WEEK.
 #[derive(Debug, Clone, Copy)]
-pub(super) enum TimeFunction {
+pub(crate) enum TimeFunction {
     Operator(BinOp, Elem, Elem),
     DateTod(Elem),
     Concat(Elem),
@@ -32,19 +29,44 @@ const YEAR_MONTH_DAY: [&str; 3] = ["YEAR", "MONTH", "DAY"];
 const HOUR_MINUTE_SECOND_MS: [&str; 4] = ["HOUR", "MINUTE", "SECOND", "MILLISECOND"];
 
 /// Maximum length of the temporaries that hold string function results.
-pub(super) const MAX_TEMP_STRING: u32 = 1024;
+pub(crate) const MAX_TEMP_STRING: u32 = 1024;
 
 /// A standard-function call being compiled: its name, arguments and the type the context
 /// expects of literal-only arguments.
-pub(super) struct StdArgs<'e> {
-    pub(super) name: &'e str,
-    pub(super) id: &'e Ident,
-    pub(super) exprs: Vec<&'e Expr>,
-    pub(super) ctx: Option<Type>,
-    pub(super) span: Span,
+pub(crate) struct StdArgs<'e> {
+    pub(crate) name: &'e str,
+    pub(crate) id: &'e Ident,
+    pub(crate) exprs: Vec<&'e Expr>,
+    pub(crate) ctx: Option<Type>,
+    pub(crate) span: Span,
     /// The type of a typed form (`SQRT_LREAL`, `MAX_DINT`): its typed arguments convert
     /// to it implicitly and it is the result.
-    pub(super) typed: Option<Elem>,
+    pub(crate) typed: Option<Elem>,
+}
+
+/// The input and the output targets (one per part of `parts`) of a SPLIT_ call with the
+/// arguments `args`, given formally (`YEAR => y`) or in order after the input, and the
+/// arguments that are neither (an unknown output, or anything else).
+pub(crate) fn split_arguments<'e>(
+    parts: &[&str],
+    args: &'e [Arg],
+) -> (Option<&'e Expr>, Vec<Option<&'e Expr>>, Vec<&'e Arg>) {
+    let mut input = None;
+    let mut targets = vec![None; parts.len()];
+    let mut misfits = Vec::new();
+    for (i, a) in args.iter().enumerate() {
+        match (&a.name, a.output) {
+            (None, _) if i == 0 => input = Some(&a.value),
+            (Some(n), false) if n.name == "IN" => input = Some(&a.value),
+            (None, _) if i <= parts.len() => targets[i - 1] = Some(&a.value),
+            (Some(n), true) => match parts.iter().position(|p| *p == n.name) {
+                Some(k) => targets[k] = Some(&a.value),
+                None => misfits.push(a),
+            },
+            _ => misfits.push(a),
+        }
+    }
+    (input, targets, misfits)
 }
 
 impl Gen<'_> {
@@ -66,7 +88,7 @@ impl Gen<'_> {
     }
 
     /// `TRUNC_INT` and `REAL_TRUNC_INT`-style forms: (argument type if given, result type).
-    pub(super) fn typed_trunc(name: &str) -> Option<(Option<Elem>, Elem)> {
+    pub(crate) fn typed_trunc(name: &str) -> Option<(Option<Elem>, Elem)> {
         let (from, to) = match name.split_once("TRUNC_")? {
             ("", to) => (None, to),
             (from, to) => (Some(Elem::from_name(from.strip_suffix('_')?)?), to),
@@ -79,7 +101,7 @@ impl Gen<'_> {
     }
 
     /// The date and time functions of IEC 61131-3 (3rd edition, tables 35 and 36).
-    pub(super) fn time_function(name: &str) -> Option<TimeFunction> {
+    pub(crate) fn time_function(name: &str) -> Option<TimeFunction> {
         use Elem::*;
         use TimeFunction::*;
         let op = |op, a, b| Some(Operator(op, a, b));
@@ -123,6 +145,8 @@ impl Gen<'_> {
         }
     }
 
+    /// Emits a call of the standard function `name` (the callee `id`) as the checker
+    /// ([`crate::sema::stdcall`]) passed it; `None` if `name` is not a standard function.
     pub(crate) fn std_call(
         &mut self,
         name: &str,
@@ -131,21 +155,12 @@ impl Gen<'_> {
         expected: Option<&Type>,
         span: Span,
     ) -> Option<Type> {
-        // Literal-only arguments adapt to the numeric type the context expects.
-        let ctx = expected
-            .filter(|t| {
-                t.elem().is_some_and(|e| e.is_numeric())
-                    && !matches!(t, Type::Enum(_) | Type::Exception)
-            })
-            .map(|t| Type::Elem(t.elem().unwrap_or(Elem::DInt)));
+        let ctx = Self::literal_context(expected);
         if let Some(f) = Self::time_function(name) {
             return Some(self.std_time(f, id, args, expected, span));
         }
         if name == "SIZEOF" {
-            return Some(self.std_sizeof(id, args, expected, span));
-        }
-        if self.check_only {
-            self.check_no_outputs(id, args);
+            return Some(self.std_sizeof(args, expected));
         }
         if let Some(target) = name.strip_prefix("TO_") {
             return self.generic_conversion(target, id, args, span);
@@ -154,7 +169,7 @@ impl Gen<'_> {
             Some((base, t)) => (base, Some(t)),
             None => (name, None),
         };
-        let Some(exprs) = self.std_arguments(name, id, args) else {
+        let Some(exprs) = self.std_arguments(id, args) else {
             return Some(Type::Error);
         };
         let c = StdArgs {
@@ -165,12 +180,6 @@ impl Gen<'_> {
             span,
             typed,
         };
-        if let Some(t) = typed
-            && self.check_only
-            && !self.typed_arguments(&c, t)
-        {
-            return Some(Type::Error);
-        }
         match name {
             "SQRT" | "LN" | "LOG" | "EXP" | "SIN" | "COS" | "TAN" | "ASIN" | "ACOS" | "ATAN"
             | "EXPT" | "ABS" | "TRUNC" | "__NOW" | "ATAN2" | "TIME" | "LTIME" => {
@@ -185,9 +194,20 @@ impl Gen<'_> {
         }
     }
 
+    /// The numeric type the context `expected` asks of literal-only arguments (they adapt
+    /// to it).
+    pub(crate) fn literal_context(expected: Option<&Type>) -> Option<Type> {
+        expected
+            .filter(|t| {
+                t.elem().is_some_and(|e| e.is_numeric())
+                    && !matches!(t, Type::Enum(_) | Type::Exception)
+            })
+            .map(|t| Type::Elem(t.elem().unwrap_or(Elem::DInt)))
+    }
+
     /// A typed form of an overloaded standard function (IEC 61131-3: `SQRT_LREAL`,
     /// `ABS_INT`, `MAX_DINT`, `EXPT_REAL`, `SEL_TIME`, ...): (the function, the type).
-    pub(super) fn typed_overload(name: &str) -> Option<(&str, Elem)> {
+    pub(crate) fn typed_overload(name: &str) -> Option<(&str, Elem)> {
         let (base, ty) = name.rsplit_once('_')?;
         let t = Elem::from_name(ty)?;
         let fits = match base {
@@ -201,77 +221,9 @@ impl Gen<'_> {
         fits.then_some((base, t))
     }
 
-    /// Checks that the arguments of a typed form convert to its type implicitly (SEL's
-    /// selector, MUX's index and EXPT's exponent are not typed). False after reporting one
-    /// that does not.
-    /// Reports an output argument (`=>`) of the standard function `id`, which has none (the
-    /// checking pass asks).
-    fn check_no_outputs(&mut self, id: &Ident, args: &[Arg]) {
-        if let Some(a) = args.iter().find(|a| a.output) {
-            self.error(
-                codes::UNKNOWN_PARAMETER,
-                a.span,
-                format!("{} has no outputs", id.text),
-            );
-            self.surface(&a.value);
-        }
-    }
-
-    /// Reports what is wrong with `target` (the place `place`) as the output `part` of a
-    /// SPLIT_ function (the checking pass asks); `false` when it takes no integer.
-    fn check_split_output(&mut self, part: &str, place: &Place, target: &Expr) -> bool {
-        if !place.ty.is_integral() {
-            if !place.ty.is_error() {
-                let msg = format!(
-                    "the output {part} is an integer, not {}",
-                    self.tname(&place.ty)
-                );
-                self.error(codes::OUTPUT_TARGET, target.span, msg);
-            }
-            return false;
-        }
-        crate::sema::call::check_output_writable(self, place, target);
-        true
-    }
-
-    pub(super) fn typed_arguments(&mut self, c: &StdArgs, t: Elem) -> bool {
-        let untyped = match c.name {
-            "SEL" | "MUX" => 1,
-            _ => 0,
-        };
-        let typed_count = match c.name {
-            "EXPT" => 1,
-            _ => c.exprs.len(),
-        };
-        let mut ok = true;
-        for e in c.exprs.iter().take(typed_count).skip(untyped) {
-            if is_flexible(e) {
-                continue;
-            }
-            let at = self.infer(e);
-            let fits = !matches!(at, Type::Enum(_) | Type::Exception)
-                && at.elem().is_some_and(|x| implicit_ok(x, t));
-            if !fits {
-                if at.is_error() {
-                    self.surface(e);
-                } else {
-                    let msg = format!(
-                        "{} takes {t} arguments, found {} (convert it with {}_TO_{t})",
-                        c.id.text,
-                        self.tname(&at),
-                        self.tname(&at)
-                    );
-                    self.error(codes::IMPLICIT_CONVERSION, e.span, msg);
-                }
-                ok = false;
-            }
-        }
-        ok
-    }
-
     /// The formal input names of a standard function called with `count` arguments
     /// (IEC 61131-3: `IN`, `IN1`.., `G`, `K`, `MN`, `MX`, `N`, `L`, `P`, `YEAR`, ...).
-    pub(super) fn std_formals(name: &str, count: usize) -> Vec<String> {
+    pub(crate) fn std_formals(name: &str, count: usize) -> Vec<String> {
         let numbered = |first: usize, n: usize| (first..first + n).map(|i| format!("IN{i}"));
         let fixed: &[&str] = match name {
             "MAX" | "MIN" | "CONCAT" => return numbered(1, count).collect(),
@@ -310,109 +262,19 @@ impl Gen<'_> {
         fixed.iter().map(|s| s.to_string()).collect()
     }
 
-    /// The argument expressions of a standard function in the order of its inputs: the
-    /// positional ones first, the formal ones (`IN2 := x`) put in their place. `None` after
-    /// reporting a misplaced, unknown, repeated or missing one.
-    /// The checking pass places them (reporting what is wrong) and records the order
-    /// ([`crate::typed::StdArguments`]); emission reads the record.
-    pub(super) fn std_arguments<'e>(
-        &mut self,
-        name: &str,
-        id: &Ident,
-        args: &'e [Arg],
-    ) -> Option<Vec<&'e Expr>> {
-        let order = if self.check_only {
-            let order = self.place_std_arguments(name, id, args)?;
-            self.std_arguments.record(self.cur, id, order.clone());
-            order
-        } else {
-            let Some(order) = self.std_arguments.of(self.cur, id) else {
-                self.missing_record(id.span, "placed no arguments for this call");
-                return None;
-            };
-            order.clone()
-        };
-        Some(order.into_iter().map(|i| &args[i].value).collect())
-    }
-
-    /// The index in `args` of each argument of standard function `name` in the order of its
-    /// inputs (see [`Gen::std_arguments`]).
-    fn place_std_arguments(&mut self, name: &str, id: &Ident, args: &[Arg]) -> Option<Vec<usize>> {
-        let inputs: Vec<(usize, &Arg)> =
-            args.iter().enumerate().filter(|(_, a)| !a.output).collect();
-        if inputs.iter().all(|(_, a)| a.name.is_none()) {
-            return Some(inputs.iter().map(|(i, _)| *i).collect());
-        }
-        let formals = Self::std_formals(name, inputs.len());
-        let mut slots: Vec<Option<usize>> = vec![None; formals.len().max(inputs.len())];
-        let mut ok = true;
-        let mut named_seen = false;
-        for (i, &(index, a)) in inputs.iter().enumerate() {
-            let slot = match &a.name {
-                None if named_seen => {
-                    self.error(
-                        codes::ARGUMENT_ORDER,
-                        a.span,
-                        "positional arguments must come before named ones",
-                    );
-                    ok = false;
-                    continue;
-                }
-                None => i,
-                Some(n) => {
-                    named_seen = true;
-                    match formals.iter().position(|f| *f == n.name) {
-                        Some(k) => k,
-                        None => {
-                            let msg = format!(
-                                "{} has no input `{}` (its inputs: {})",
-                                id.text,
-                                n.text,
-                                formals.join(", ")
-                            );
-                            self.error(codes::UNKNOWN_PARAMETER, n.span, msg);
-                            ok = false;
-                            continue;
-                        }
-                    }
-                }
-            };
-            if slots[slot].is_some() {
-                let msg = format!(
-                    "input `{}` given twice",
-                    formals.get(slot).map_or("?", |f| f)
-                );
-                self.error(codes::DUPLICATE_ARGUMENT, a.span, msg);
-                ok = false;
-                continue;
-            }
-            slots[slot] = Some(index);
-        }
-        let given = slots
-            .iter()
-            .rposition(Option::is_some)
-            .map_or(0, |last| last + 1);
-        if let Some(missing) = slots[..given].iter().position(Option::is_none) {
-            let msg = format!(
-                "{} needs its input `{}`",
-                id.text,
-                formals.get(missing).map_or("?", |f| f)
-            );
-            self.error(codes::MISSING_ARGUMENT, id.span, msg);
-            ok = false;
-        }
-        if !ok {
-            for a in args {
-                self.surface(&a.value);
-            }
+    /// The argument expressions of a standard function in the order of its inputs, as the
+    /// checker placed them ([`crate::typed::StdArguments`]).
+    fn std_arguments<'e>(&mut self, id: &Ident, args: &'e [Arg]) -> Option<Vec<&'e Expr>> {
+        let Some(order) = self.std_arguments.of(self.cur, id) else {
+            self.missing_record(id.span, "placed no arguments for this call");
             return None;
-        }
-        Some(slots.into_iter().flatten().collect())
+        };
+        Some(order.iter().map(|&i| &args[i].value).collect())
     }
 
     /// `TO_INT(x)`, `TO_STRING(x)`, ... (IEC 61131-3 3rd edition): the conversion from the
-    /// argument's type.
-    pub(super) fn generic_conversion(
+    /// argument's type the checker recorded ([`crate::typed::GenericTypes`]).
+    fn generic_conversion(
         &mut self,
         target: &str,
         id: &Ident,
@@ -422,19 +284,12 @@ impl Gen<'_> {
         if target != "STRING" && Elem::from_name(target).is_none() {
             return None;
         }
-        let inputs = self.std_arguments(&id.name, id, args)?;
+        let inputs = self.std_arguments(id, args)?;
         let [arg] = inputs[..] else {
-            self.error(
-                codes::ARGUMENT_COUNT,
-                span,
-                format!("{} takes 1 argument, {} given", id.text, inputs.len()),
-            );
-            for e in inputs {
-                self.surface(e);
-            }
+            self.missing_record(span, "passed a conversion without one argument");
             return Some(Type::Error);
         };
-        let Some(source) = self.conversion_source(id, arg) else {
+        let Some(source) = self.recorded_generic_type(id) else {
             return Some(Type::Error);
         };
         let source = match source {
@@ -448,27 +303,8 @@ impl Gen<'_> {
         self.conversion(&format!("{source}_TO_{target}"), id, &[arg], span)
     }
 
-    /// The type `TO_...(arg)` converts from ([`rules::conversion_source`]): decided and
-    /// recorded by the checking pass ([`crate::typed::GenericTypes`]), read by emission.
-    fn conversion_source(&mut self, id: &Ident, arg: &Expr) -> Option<Type> {
-        if !self.check_only {
-            return self.recorded_generic_type(id);
-        }
-        let t = self.infer(arg);
-        if t.is_error() {
-            self.surface(arg);
-            return None;
-        }
-        let Some(source) = rules::conversion_source(operand(arg, &t)) else {
-            self.bad_inferred_arg(arg, &t, "an elementary value");
-            return None;
-        };
-        self.record_generic_type(id, source.clone());
-        Some(source)
-    }
-
     /// Date and time functions (see [`TimeFunction`]).
-    pub(super) fn std_time(
+    fn std_time(
         &mut self,
         f: TimeFunction,
         id: &Ident,
@@ -477,87 +313,41 @@ impl Gen<'_> {
         span: Span,
     ) -> Type {
         if let TimeFunction::Split(t) = f {
-            return self.std_split(t, id, args, span);
+            return self.std_split(t, args, span);
         }
-        if self.check_only {
-            self.check_no_outputs(id, args);
-        }
-        let Some(exprs) = self.std_arguments(&id.name, id, args) else {
+        let Some(exprs) = self.std_arguments(id, args) else {
             return Type::Error;
         };
-        let c = StdArgs {
-            name: &id.name,
-            id,
-            exprs,
-            ctx: None,
-            span,
-            typed: None,
-        };
         match f {
-            TimeFunction::Operator(op, ta, tb) => {
-                if !self.arity(&c, 2) {
-                    return Type::Error;
-                }
-                if self.check_only && !self.time_operands_fit(&c, [ta, tb]) {
-                    return Type::Error;
-                }
-                self.binary(op, c.exprs[0], c.exprs[1], expected, span)
-            }
+            TimeFunction::Operator(op, ..) => self.binary(op, exprs[0], exprs[1], expected, span),
             TimeFunction::DateTod(result) => {
-                if !self.arity(&c, 2) {
-                    return Type::Error;
-                }
-                let (date, tod) = if result == Elem::LDt {
-                    (Type::Elem(Elem::LDate), Type::Elem(Elem::LTod))
-                } else {
-                    (Type::Elem(Elem::Date), Type::Elem(Elem::Tod))
-                };
-                self.value_to(c.exprs[0], &date);
-                self.value_to(c.exprs[1], &tod);
+                let (date, tod) = Self::date_and_time_of(result);
+                self.value_to(exprs[0], &Type::Elem(date));
+                self.value_to(exprs[1], &Type::Elem(tod));
                 self.op(Opcode::Add);
                 Type::Elem(result)
             }
             TimeFunction::Concat(result) => {
-                let family = result.temporal_family();
-                let n = match family {
-                    Some(Elem::Date) => 3,
-                    Some(Elem::Tod) => 4,
-                    _ => 7,
-                };
-                if !self.arity(&c, n) {
-                    return Type::Error;
-                }
-                let (date_args, tod_args) = match family {
-                    Some(Elem::Date) => (&c.exprs[..3], &c.exprs[..0]),
-                    Some(Elem::Tod) => (&c.exprs[..0], &c.exprs[..4]),
-                    _ => (&c.exprs[..3], &c.exprs[3..]),
-                };
-                if !date_args.is_empty() {
-                    for e in date_args {
+                let (date_parts, tod_parts) = Self::concat_parts(result);
+                if date_parts > 0 {
+                    for e in &exprs[..date_parts] {
                         self.int_arg(e);
                     }
                     self.emit(|b| b.call_builtin(Builtin::DateFromParts));
                 }
-                if !tod_args.is_empty() {
-                    for e in tod_args {
+                if tod_parts > 0 {
+                    for e in &exprs[date_parts..] {
                         self.int_arg(e);
                     }
                     self.emit(|b| b.call_builtin(Builtin::TodFromParts));
                 }
-                if !date_args.is_empty() && !tod_args.is_empty() {
+                if date_parts > 0 && tod_parts > 0 {
                     self.op(Opcode::Add);
                 }
                 Type::Elem(result)
             }
             TimeFunction::DayOfWeek => {
-                if !self.arity(&c, 1) {
-                    return Type::Error;
-                }
-                let t = self.infer(c.exprs[0]);
-                if self.check_only && !rules::is_date(&t) {
-                    return self.bad_inferred_arg(c.exprs[0], &t, "a DATE");
-                }
-                self.expr(c.exprs[0], None);
+                self.expr(exprs[0], None);
                 self.emit(|b| b.call_builtin(Builtin::DayOfWeek));
                 Type::INT
             }
@@ -565,70 +355,61 @@ impl Gen<'_> {
         }
     }
 
-    /// Whether the two arguments of the date and time operator `c` fit the operands `want`
-    /// ([`rules::time_operand_fits`]); reports the first that does not (the checking pass
-    /// asks).
-    fn time_operands_fit(&mut self, c: &StdArgs, want: [Elem; 2]) -> bool {
-        let types: Vec<Type> = c.exprs.iter().map(|e| self.infer(e)).collect();
-        if types.iter().any(Type::is_error) {
-            for (e, _) in c.exprs.iter().zip(&types).filter(|(_, t)| t.is_error()) {
-                self.surface(e);
-            }
-            return false;
+    /// The date and the time of day types CONCAT_DATE_TOD (`result` DT) or
+    /// CONCAT_DATE_LTOD (LDT) joins.
+    pub(crate) fn date_and_time_of(result: Elem) -> (Elem, Elem) {
+        if result == Elem::LDt {
+            (Elem::LDate, Elem::LTod)
+        } else {
+            (Elem::Date, Elem::Tod)
         }
-        for ((e, t), want) in c.exprs.iter().zip(&types).zip(want) {
-            if !rules::time_operand_fits(want, operand(e, t)) {
-                let what = if want == Elem::LReal {
-                    "a number".to_string()
-                } else {
-                    format!("a {want}")
-                };
-                self.bad_arg(e, t, &what);
-                return false;
-            }
+    }
+
+    /// How many date parts (year, month, day) and time parts (hour, minute, second,
+    /// millisecond) CONCAT_DATE, CONCAT_TOD or CONCAT_DT (its `result` type) takes.
+    pub(crate) fn concat_parts(result: Elem) -> (usize, usize) {
+        match result.temporal_family() {
+            Some(Elem::Date) => (3, 0),
+            Some(Elem::Tod) => (0, 4),
+            _ => (3, 4),
         }
-        true
     }
 
     /// SIZEOF(variable or type): its size in bytes in data memory, a constant of the
     /// integer type the context wants (UDINT without one).
-    pub(super) fn std_sizeof(
-        &mut self,
-        id: &Ident,
-        args: &[Arg],
-        expected: Option<&Type>,
-        span: Span,
-    ) -> Type {
+    fn std_sizeof(&mut self, args: &[Arg], expected: Option<&Type>) -> Type {
         let [arg] = args else {
-            self.error(
-                codes::ARGUMENT_COUNT,
-                span,
-                format!("{} takes 1 argument, {} given", id.text, args.len()),
-            );
             return Type::Error;
         };
-        let ty = match &arg.value.kind {
+        let ty = self.sizeof_operand(&arg.value);
+        let (size, result) = self.sizeof_value(&ty, expected);
+        self.push_int(size as i64);
+        Type::Elem(result)
+    }
+
+    /// The type SIZEOF measures: of the type named `e`, else of the variable or expression.
+    pub(crate) fn sizeof_operand(&mut self, e: &Expr) -> Type {
+        match &e.kind {
             ExprKind::Name(n)
                 if self.prog.pous[self.cur].var(&n.name).is_none()
                     && self.prog.global(&n.name).is_none() =>
             {
                 match self.type_by_name(&n.name) {
                     Some(t) => t,
-                    None => self.infer(&arg.value),
+                    None => self.infer(e),
                 }
             }
-            _ => self.infer(&arg.value),
-        };
-        if ty.is_error() {
-            // Report why (the dry inference reported nothing).
-            self.expr(&arg.value, None);
-            return Type::Error;
+            _ => self.infer(e),
         }
-        // A STRING[n] counts its text and terminator, n + 1 bytes as in CODESYS: what a byte
-        // pointer to it (`ADR(s)`) may walk (its length header is not part of that).
+    }
+
+    /// The size SIZEOF gives for `ty` and its type where `expected` is wanted. A STRING[n]
+    /// counts its text and terminator, n + 1 bytes as in CODESYS: what a byte pointer to it
+    /// (`ADR(s)`) may walk (its length header is not part of that).
+    pub(crate) fn sizeof_value(&self, ty: &Type, expected: Option<&Type>) -> (i128, Elem) {
         let size = match ty {
-            Type::String(n) => n as i128 + 1,
-            _ => self.prog.size_align(&ty).0 as i128,
+            Type::String(n) => *n as i128 + 1,
+            _ => self.prog.size_align(ty).0 as i128,
         };
         let result = expected
             .and_then(|t| t.elem())
@@ -638,12 +419,11 @@ impl Gen<'_> {
                     && e.int_range().1 >= size
             })
             .unwrap_or(Elem::UDInt);
-        self.push_int(size as i64);
-        Type::Elem(result)
+        (size, result)
     }
 
     /// The data type called `name` (elementary, STRING, a TYPE or a function block).
-    pub(super) fn type_by_name(&self, name: &str) -> Option<Type> {
+    pub(crate) fn type_by_name(&self, name: &str) -> Option<Type> {
         if let Some(e) = Elem::from_name(name) {
             return Some(Type::Elem(e));
         }
@@ -657,18 +437,9 @@ impl Gen<'_> {
         (self.prog.pous[pi].kind == PouKind::FunctionBlock).then_some(Type::Fb(pi))
     }
 
-    /// SPLIT_DATE(IN, YEAR, MONTH, DAY), SPLIT_TOD(IN, HOUR, MINUTE, SECOND, MILLISECOND),
-    /// SPLIT_DT(IN, YEAR, ..., MILLISECOND): the parts go to the outputs, given formally
-    /// (`YEAR => y`) or in order after the input.
-    pub(super) fn std_split(
-        &mut self,
-        input_type: Elem,
-        id: &Ident,
-        args: &[Arg],
-        span: Span,
-    ) -> Type {
-        let family = input_type.temporal_family();
-        let parts: Vec<&str> = match family {
+    /// The parts SPLIT_DATE, SPLIT_TOD or SPLIT_DT (splitting `input_type`) gives.
+    pub(crate) fn split_parts(input_type: Elem) -> Vec<&'static str> {
+        match input_type.temporal_family() {
             Some(Elem::Date) => YEAR_MONTH_DAY.to_vec(),
             Some(Elem::Tod) => HOUR_MINUTE_SECOND_MS.to_vec(),
             _ => YEAR_MONTH_DAY
@@ -676,59 +447,17 @@ impl Gen<'_> {
                 .chain(HOUR_MINUTE_SECOND_MS.iter())
                 .copied()
                 .collect(),
-        };
-        let mut input: Option<&Expr> = None;
-        let mut targets: Vec<Option<&Expr>> = vec![None; parts.len()];
-        for (i, a) in args.iter().enumerate() {
-            match (&a.name, a.output) {
-                (None, _) if i == 0 => input = Some(&a.value),
-                (Some(n), false) if n.name == "IN" => input = Some(&a.value),
-                (None, _) if i <= parts.len() => targets[i - 1] = Some(&a.value),
-                (Some(n), true) => match parts.iter().position(|p| *p == n.name) {
-                    Some(k) => targets[k] = Some(&a.value),
-                    None if self.check_only => {
-                        let msg = format!(
-                            "{} has no output `{}` (its outputs: {})",
-                            id.text,
-                            n.text,
-                            parts.join(", ")
-                        );
-                        self.error(codes::UNKNOWN_PARAMETER, n.span, msg);
-                    }
-                    None => {}
-                },
-                _ if self.check_only => {
-                    let msg = format!("{} takes IN and the outputs {}", id.text, parts.join(", "));
-                    self.error(codes::UNKNOWN_PARAMETER, a.span, msg);
-                }
-                _ => {}
-            }
         }
-        let input_type_ok = input.filter(|e| {
-            !self.check_only
-                || self
-                    .infer(e)
-                    .value_elem()
-                    .is_some_and(|e| e.temporal_family() == family)
-        });
-        let Some(input) = input_type_ok else {
-            match input {
-                None => self.error(
-                    codes::MISSING_ARGUMENT,
-                    span,
-                    format!("{} needs its input IN", id.text),
-                ),
-                Some(e) => {
-                    let t = self.infer(e);
-                    self.bad_inferred_arg(e, &t, &format!("a {input_type}"));
-                }
-            }
-            // The outputs still say what is wrong with them.
-            for target in targets.into_iter().flatten() {
-                if let Some(p) = self.place(target) {
-                    self.drop_place(&p);
-                }
-            }
+    }
+
+    /// SPLIT_DATE(IN, YEAR, MONTH, DAY), SPLIT_TOD(IN, HOUR, MINUTE, SECOND, MILLISECOND),
+    /// SPLIT_DT(IN, YEAR, ..., MILLISECOND): the parts go to the outputs, given formally
+    /// (`YEAR => y`) or in order after the input ([`split_arguments`]).
+    fn std_split(&mut self, input_type: Elem, args: &[Arg], span: Span) -> Type {
+        let parts = Self::split_parts(input_type);
+        let (input, targets, _) = split_arguments(&parts, args);
+        let Some(input) = input else {
+            self.missing_record(span, "passed a SPLIT_ call without its input");
             return Type::Error;
         };
         let value = self.temp_cell();
@@ -739,9 +468,6 @@ impl Gen<'_> {
             let Some(place) = self.place(target) else {
                 continue;
             };
-            if self.check_only && !self.check_split_output(part, &place, target) {
-                continue;
-            }
             let te = place.ty.value_elem().unwrap_or(Elem::LInt);
             self.emit(|b| b.ld_abs(MemType::I64, value));
             match *part {
@@ -788,35 +514,10 @@ impl Gen<'_> {
         Type::Void
     }
 
-    /// False (after reporting it and type-checking the arguments) unless the call has
-    /// exactly `n` arguments (the checking pass asks; emission takes the count as checked).
-    pub(super) fn arity(&mut self, c: &StdArgs, n: usize) -> bool {
-        if !self.check_only || c.exprs.len() == n {
-            return true;
-        }
-        self.error(
-            codes::ARGUMENT_COUNT,
-            c.span,
-            format!(
-                "{} takes {} argument(s), {} given",
-                c.id.text,
-                n,
-                c.exprs.len()
-            ),
-        );
-        for e in &c.exprs {
-            self.surface(e);
-        }
-        false
-    }
-
     /// Numeric functions: SQRT and the other REAL functions, EXPT, ABS, TRUNC, __NOW.
     pub(super) fn std_numeric(&mut self, c: &StdArgs) -> Option<Type> {
         let t = match c.name {
             "SQRT" | "LN" | "LOG" | "EXP" | "SIN" | "COS" | "TAN" | "ASIN" | "ACOS" | "ATAN" => {
-                if !self.arity(c, 1) {
-                    return Some(Type::Error);
-                }
                 let rt = match self.real_operand(c) {
                     Some(t) => t,
                     None => return Some(Type::Error),
@@ -849,17 +550,11 @@ impl Gen<'_> {
                 Type::Elem(rt)
             }
             "EXPT" | "ATAN2" => {
-                if !self.arity(c, 2) {
-                    return Some(Type::Error);
-                }
                 let rt = match self.real_operand(c) {
                     Some(t) => t,
                     None => return Some(Type::Error),
                 };
                 let t1 = self.infer(c.exprs[1]);
-                if !t1.elem().is_some_and(|e| e.is_numeric()) || matches!(t1, Type::Enum(_)) {
-                    return Some(self.bad_inferred_arg(c.exprs[1], &t1, "a number"));
-                }
                 self.value_to_any(c.exprs[1], &t1, &Type::Elem(rt));
                 let single = rt == Elem::Real;
                 let builtin = match (c.name, single) {
@@ -872,17 +567,13 @@ impl Gen<'_> {
                 Type::Elem(rt)
             }
             "ABS" => {
-                if !self.arity(c, 1) {
-                    return Some(Type::Error);
-                }
-                let t = match c.typed {
-                    Some(forced) => {
-                        self.value_to(c.exprs[0], &Type::Elem(forced));
-                        Type::Elem(forced)
+                match c.typed {
+                    Some(forced) => self.value_to(c.exprs[0], &Type::Elem(forced)),
+                    None => {
+                        self.expr(c.exprs[0], c.ctx.as_ref());
                     }
-                    None => self.expr(c.exprs[0], c.ctx.as_ref()),
-                };
-                let Some(e) = self.argument_type(c, &t, rules::abs_type, "a number") else {
+                }
+                let Some(e) = self.argument_type(c) else {
                     return Some(Type::Error);
                 };
                 match e {
@@ -899,27 +590,9 @@ impl Gen<'_> {
             // TRUNC gives the integer type the context wants (IEC: ANY_INT), else DINT;
             // TRUNC_INT, REAL_TRUNC_INT, ... a fixed one. NUMERIC_ERROR when it does not fit.
             name if name == "TRUNC" || Self::typed_trunc(name).is_some() => {
-                if !self.arity(c, 1) {
-                    return Some(Type::Error);
-                }
-                let (from, target) = match Self::typed_trunc(name) {
-                    Some(typed) => typed,
-                    None => (
-                        None,
-                        c.ctx
-                            .as_ref()
-                            .and_then(|t| t.elem())
-                            .filter(|e| e.is_integral())
-                            .unwrap_or(Elem::DInt),
-                    ),
-                };
+                let (from, target) = Self::trunc_types(c);
                 let rt = match from {
                     Some(f) => {
-                        let t = self.infer(c.exprs[0]);
-                        if !(t.elem().is_some_and(|e| implicit_ok(e, f)) || is_flexible(c.exprs[0]))
-                        {
-                            return Some(self.bad_inferred_arg(c.exprs[0], &t, &format!("a {f}")));
-                        }
                         self.value_to(c.exprs[0], &Type::Elem(f));
                         f
                     }
@@ -940,9 +613,6 @@ impl Gen<'_> {
             }
             // `TIME()` (CODESYS): the time since the PLC started, here the cycle time.
             "__NOW" | "TIME" | "LTIME" => {
-                if !self.arity(c, 0) {
-                    return Some(Type::Error);
-                }
                 self.op(Opcode::Now);
                 if c.name == "LTIME" {
                     Type::Elem(Elem::LTime)
@@ -955,30 +625,36 @@ impl Gen<'_> {
         Some(t)
     }
 
+    /// The type TRUNC (or a typed truncation, `REAL_TRUNC_INT`) of the call `c` converts
+    /// from (`None`: a REAL or LREAL by its argument) and to: a typed form's, else the
+    /// integer type the context wants (IEC: ANY_INT), else DINT.
+    pub(crate) fn trunc_types(c: &StdArgs) -> (Option<Elem>, Elem) {
+        match Self::typed_trunc(c.name) {
+            Some(typed) => typed,
+            None => (
+                None,
+                c.ctx
+                    .as_ref()
+                    .and_then(|t| t.elem())
+                    .filter(|e| e.is_integral())
+                    .unwrap_or(Elem::DInt),
+            ),
+        }
+    }
+
     /// Selection: MOVE, SEL, MAX/MIN, LIMIT, MUX.
     pub(super) fn std_selection(&mut self, c: &StdArgs) -> Option<Type> {
         let t = match c.name {
-            "MOVE" => {
-                if !self.arity(c, 1) {
-                    return Some(Type::Error);
+            "MOVE" => match c.typed {
+                Some(forced) => {
+                    self.value_to(c.exprs[0], &Type::Elem(forced));
+                    Type::Elem(forced)
                 }
-                match c.typed {
-                    Some(forced) => {
-                        self.value_to(c.exprs[0], &Type::Elem(forced));
-                        Type::Elem(forced)
-                    }
-                    None => self.expr(c.exprs[0], None),
-                }
-            }
+                None => self.expr(c.exprs[0], None),
+            },
             "SEL" => {
-                if !self.arity(c, 3) {
-                    return Some(Type::Error);
-                }
                 self.value_to(c.exprs[0], &Type::BOOL);
-                let t = match c.typed {
-                    Some(forced) => Type::Elem(forced),
-                    None => self.generic_type(c, 1),
-                };
+                let t = self.generic_type(c);
                 if t.is_error() {
                     return Some(t);
                 }
@@ -990,28 +666,8 @@ impl Gen<'_> {
                 t
             }
             "MAX" | "MIN" => {
-                if self.check_only && c.exprs.len() < 2 {
-                    self.error(
-                        codes::ARGUMENT_COUNT,
-                        c.span,
-                        format!("{} needs at least 2 arguments", c.id.text),
-                    );
-                    c.exprs.iter().for_each(|e| self.surface(e));
-                    return Some(Type::Error);
-                }
-                let t = match c.typed {
-                    Some(forced) => Type::Elem(forced),
-                    None => self.generic_type(c, 0),
-                };
+                let t = self.generic_type(c);
                 let Some(e) = t.elem() else {
-                    if !t.is_error() {
-                        let msg = format!(
-                            "{} needs numeric, TIME or enumeration arguments, found {}",
-                            c.id.text,
-                            self.tname(&t)
-                        );
-                        self.error(codes::INCOMPATIBLE_ARGUMENTS, c.span, msg);
-                    }
                     return Some(Type::Error);
                 };
                 let first_t = self.infer(c.exprs[0]);
@@ -1024,13 +680,7 @@ impl Gen<'_> {
                 t
             }
             "LIMIT" => {
-                if !self.arity(c, 3) {
-                    return Some(Type::Error);
-                }
-                let t = match c.typed {
-                    Some(forced) => Type::Elem(forced),
-                    None => self.generic_type(c, 0),
-                };
+                let t = self.generic_type(c);
                 let Some(e) = t.elem() else {
                     return Some(Type::Error);
                 };
@@ -1045,30 +695,14 @@ impl Gen<'_> {
                 t
             }
             "MUX" => {
-                if self.check_only && c.exprs.len() < 2 {
-                    self.error(
-                        codes::ARGUMENT_COUNT,
-                        c.span,
-                        "MUX needs a selector and at least one input",
-                    );
-                    c.exprs.iter().for_each(|e| self.surface(e));
-                    return Some(Type::Error);
-                }
-                let kt = self.expr(c.exprs[0], Some(&Type::DINT));
-                if self.check_only && !kt.elem().is_some_and(|e| e.is_integral()) && !kt.is_error()
-                {
-                    return Some(self.bad_arg(c.exprs[0], &kt, "an integer selector"));
-                }
+                self.expr(c.exprs[0], Some(&Type::DINT));
                 let n = c.exprs.len() as i64 - 1;
                 let k = self.temp_cell();
                 self.emit(|b| {
                     b.chk_index(0, n - 1);
                     b.st_abs(MemType::I64, k);
                 });
-                let t = match c.typed {
-                    Some(forced) => Type::Elem(forced),
-                    None => self.generic_type(c, 1),
-                };
+                let t = self.generic_type(c);
                 let end = self.label();
                 for (i, x) in c.exprs[1..].iter().enumerate() {
                     let next = self.label();
@@ -1099,12 +733,8 @@ impl Gen<'_> {
     pub(super) fn std_bits(&mut self, c: &StdArgs) -> Option<Type> {
         let t = match c.name {
             "SHL" | "SHR" | "ROL" | "ROR" => {
-                if !self.arity(c, 2) {
-                    return Some(Type::Error);
-                }
-                let t = self.expr(c.exprs[0], None);
-                let what = "a bit string or integer";
-                let Some(e) = self.argument_type(c, &t, rules::shift_type, what) else {
+                self.expr(c.exprs[0], None);
+                let Some(e) = self.argument_type(c) else {
                     return Some(Type::Error);
                 };
                 // The count may be of any integer type (IEC: ANY_INT).
@@ -1128,76 +758,24 @@ impl Gen<'_> {
         Some(t)
     }
 
-    pub(super) fn bad_arg(&mut self, e: &Expr, t: &Type, what: &str) -> Type {
-        if !t.is_error() {
-            let msg = format!("expected {what}, found {}", self.tname(t));
-            self.error(codes::TYPE_MISMATCH, e.span, msg);
-        }
-        Type::Error
-    }
-
-    /// [`Self::bad_arg`] for an argument so far only inferred: an erroneous one is compiled
-    /// for its own diagnostics.
-    pub(super) fn bad_inferred_arg(&mut self, e: &Expr, t: &Type, what: &str) -> Type {
-        if t.is_error() {
-            self.surface(e);
-        }
-        self.bad_arg(e, t, what)
-    }
-
-    /// Compiles an expression whose inference failed, for the diagnostics saying why (the
-    /// code does not matter: the compilation fails).
-    pub(super) fn surface(&mut self, e: &Expr) {
-        if !self.dry {
-            self.expr(e, None);
-        }
-    }
-
     /// Compiles the (first) argument of a REAL function in the type the call computes in
-    /// and returns it: the typed form's (`SQRT_LREAL`: its argument was checked), else as
-    /// [`rules::real_function_type`] decides, which the checking pass records
-    /// ([`crate::typed::GenericTypes`]) and emission reads.
-    pub(super) fn real_operand(&mut self, c: &StdArgs) -> Option<Elem> {
+    /// and returns it: the typed form's (`SQRT_LREAL`), else the one the checker recorded
+    /// ([`crate::typed::GenericTypes`]).
+    fn real_operand(&mut self, c: &StdArgs) -> Option<Elem> {
         let e = c.exprs[0];
         if let Some(forced) = c.typed.filter(|t| t.is_real()) {
             self.value_to(e, &Type::Elem(forced));
             return Some(forced);
         }
         let t = self.infer(e);
-        let target = if self.check_only {
-            let real_context = c.ctx.as_ref().and_then(|c| c.elem()) == Some(Elem::Real);
-            let Some(target) = rules::real_function_type(operand(e, &t), real_context) else {
-                self.bad_inferred_arg(e, &t, "a number");
-                return None;
-            };
-            self.record_generic_type(c.id, Type::Elem(target));
-            target
-        } else {
-            self.recorded_generic_type(c.id)?.elem()?
-        };
+        let target = self.recorded_generic_type(c.id)?.elem()?;
         self.value_to_any(e, &t, &Type::Elem(target));
         Some(target)
     }
 
-    /// The type the call `c` computes in for its first argument of type `t` (compiled): the
-    /// checking pass decides it by `rule` (reporting an argument that is not `what`) and
-    /// records it; emission reads the record.
-    fn argument_type(
-        &mut self,
-        c: &StdArgs,
-        t: &Type,
-        rule: fn(&Type) -> Option<Elem>,
-        what: &str,
-    ) -> Option<Elem> {
-        if !self.check_only {
-            return self.recorded_generic_type(c.id)?.elem();
-        }
-        let Some(e) = rule(t) else {
-            self.bad_arg(c.exprs[0], t, what);
-            return None;
-        };
-        self.record_generic_type(c.id, Type::Elem(e));
-        Some(e)
+    /// The type the call `c` computes in, as the checker recorded it.
+    fn argument_type(&mut self, c: &StdArgs) -> Option<Elem> {
+        self.recorded_generic_type(c.id)?.elem()
     }
 
     /// The type the checking pass recorded for the generic standard-function call `id` (for
@@ -1210,96 +788,12 @@ impl Gen<'_> {
         t
     }
 
-    /// Records the type the generic standard-function call `id` is called at (a walk for
-    /// inference records only what no real walk has, as the expected type may differ).
-    pub(super) fn record_generic_type(&mut self, id: &Ident, t: Type) {
-        if !self.dry || self.generic_types.of(self.cur, id).is_none() {
-            self.generic_types.record(self.cur, id, t);
-        }
-    }
-
-    /// The type a generic selection function (SEL, MAX, MIN, LIMIT, MUX) is called at: the
-    /// common type of its arguments from the `from`th. The checking pass decides it
-    /// ([`Gen::common_of`]) and records it ([`crate::typed::GenericTypes`]; a walk for
-    /// inference records only what no real walk has, as the expected type may differ);
-    /// emission reads the record.
-    fn generic_type(&mut self, c: &StdArgs, from: usize) -> Type {
-        if !self.check_only {
-            return self.recorded_generic_type(c.id).unwrap_or(Type::Error);
-        }
-        let t = self.common_of(&c.exprs[from..], c.ctx.as_ref());
-        self.record_generic_type(c.id, t.clone());
-        t
-    }
-
-    /// Common type of several arguments (for SEL/MAX/MIN/LIMIT/MUX).
-    pub(super) fn common_of(&mut self, exprs: &[&Expr], ctx: Option<&Type>) -> Type {
-        let mut acc: Option<Type> = None;
-        for e in exprs {
-            if is_flexible(e) {
-                continue;
-            }
-            let t = self.infer(e);
-            if t.is_error() {
-                self.surface(e);
-                return Type::Error;
-            }
-            acc = Some(match acc {
-                None => t,
-                Some(a) if a == t => a,
-                Some(a) => match (a.elem(), t.elem()) {
-                    (Some(x), Some(y))
-                        if !matches!(a, Type::Enum(_)) && !matches!(t, Type::Enum(_)) =>
-                    {
-                        match common_numeric(x, y) {
-                            Some(c) => Type::Elem(c),
-                            None => {
-                                let msg = format!(
-                                    "arguments of incompatible types {} and {}",
-                                    self.tname(&a),
-                                    self.tname(&t)
-                                );
-                                self.error(codes::INCOMPATIBLE_ARGUMENTS, e.span, msg);
-                                return Type::Error;
-                            }
-                        }
-                    }
-                    _ if a.is_string() && t.is_string() || a.is_wstring() && t.is_wstring() => a,
-                    _ => {
-                        let msg = format!(
-                            "arguments of incompatible types {} and {}",
-                            self.tname(&a),
-                            self.tname(&t)
-                        );
-                        self.error(codes::INCOMPATIBLE_ARGUMENTS, e.span, msg);
-                        return Type::Error;
-                    }
-                },
-            });
-        }
-        match acc {
-            Some(Type::Subrange(e, ..)) => Type::Elem(e),
-            Some(t) => {
-                if exprs.iter().any(|e| is_flexible(e) && has_real_literal(e))
-                    && !t.elem().is_some_and(|x| x.is_real())
-                {
-                    Type::LREAL
-                } else {
-                    t
-                }
-            }
-            None => {
-                if let Some(c) = ctx.filter(|c| {
-                    !exprs.iter().any(|e| has_real_literal(e))
-                        || c.elem().is_some_and(|x| x.is_real())
-                }) {
-                    c.clone()
-                } else if exprs.iter().any(|e| has_real_literal(e)) {
-                    Type::LREAL
-                } else {
-                    Type::DINT
-                }
-            }
+    /// The type a selection function (SEL, MAX, MIN, LIMIT, MUX) is called at: the typed
+    /// form's, else the one the checker recorded.
+    fn generic_type(&mut self, c: &StdArgs) -> Type {
+        match c.typed {
+            Some(forced) => Type::Elem(forced),
+            None => self.recorded_generic_type(c.id).unwrap_or(Type::Error),
         }
     }
 

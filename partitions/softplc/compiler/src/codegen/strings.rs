@@ -3,7 +3,6 @@
 
 use super::stdfuncs::*;
 use super::*;
-use crate::sema::stdfuncs as rules;
 
 impl Gen<'_> {
     /// String functions: LEN, LEFT/RIGHT, MID/DELETE, INSERT, REPLACE, FIND, CONCAT, on
@@ -13,13 +12,6 @@ impl Gen<'_> {
             return Some(Type::Error);
         };
         let wide = kind.is_wstring();
-        let kind = |len: u32| {
-            if wide {
-                Type::WString(len)
-            } else {
-                Type::String(len)
-            }
-        };
         // The builtin of the string kind.
         let pick = |narrow: Builtin| -> Builtin {
             if !wide {
@@ -40,19 +32,13 @@ impl Gen<'_> {
         };
         let t = match c.name {
             "LEN" => {
-                if !self.arity(c, 1) {
-                    return Some(Type::Error);
-                }
                 self.string_arg_of(c.exprs[0], wide);
                 self.emit(|b| b.call_builtin(pick(Builtin::StrLen)));
                 Type::INT
             }
             "LEFT" | "RIGHT" => {
-                if !self.arity(c, 2) {
-                    return Some(Type::Error);
-                }
-                let len = self.string_len_of(c.exprs[0]);
-                let dst = self.temp_string_like(&kind(len));
+                let result = self.string_result(c, wide);
+                let dst = self.temp_string_like(&result);
                 self.emit(|b| b.push_u32(dst));
                 self.string_arg_of(c.exprs[0], wide);
                 self.int_arg(c.exprs[1]);
@@ -65,14 +51,11 @@ impl Gen<'_> {
                     b.call_builtin(builtin);
                     b.push_u32(dst);
                 });
-                kind(len)
+                result
             }
             "MID" | "DELETE" => {
-                if !self.arity(c, 3) {
-                    return Some(Type::Error);
-                }
-                let len = self.string_len_of(c.exprs[0]);
-                let dst = self.temp_string_like(&kind(len));
+                let result = self.string_result(c, wide);
+                let dst = self.temp_string_like(&result);
                 self.emit(|b| b.push_u32(dst));
                 self.string_arg_of(c.exprs[0], wide);
                 self.int_arg(c.exprs[1]);
@@ -86,16 +69,11 @@ impl Gen<'_> {
                     b.call_builtin(builtin);
                     b.push_u32(dst);
                 });
-                kind(len)
+                result
             }
             "INSERT" | "REPLACE" => {
-                let n = if c.name == "INSERT" { 3 } else { 4 };
-                if !self.arity(c, n) {
-                    return Some(Type::Error);
-                }
-                let len = (self.string_len_of(c.exprs[0]) + self.string_len_of(c.exprs[1]))
-                    .min(MAX_TEMP_STRING);
-                let dst = self.temp_string_like(&kind(len));
+                let result = self.string_result(c, wide);
+                let dst = self.temp_string_like(&result);
                 self.emit(|b| b.push_u32(dst));
                 self.string_arg_of(c.exprs[0], wide);
                 self.string_arg_of(c.exprs[1], wide);
@@ -111,29 +89,17 @@ impl Gen<'_> {
                     b.call_builtin(builtin);
                     b.push_u32(dst);
                 });
-                kind(len)
+                result
             }
             "FIND" => {
-                if !self.arity(c, 2) {
-                    return Some(Type::Error);
-                }
                 self.string_arg_of(c.exprs[0], wide);
                 self.string_arg_of(c.exprs[1], wide);
                 self.emit(|b| b.call_builtin(pick(Builtin::StrFind)));
                 Type::INT
             }
             "CONCAT" => {
-                if self.check_only && c.exprs.is_empty() {
-                    self.error(codes::ARGUMENT_COUNT, c.span, "CONCAT needs arguments");
-                    return Some(Type::Error);
-                }
-                let len = c
-                    .exprs
-                    .iter()
-                    .map(|e| self.string_len_of(e))
-                    .sum::<u32>()
-                    .clamp(1, MAX_TEMP_STRING);
-                let dst = self.temp_string_like(&kind(len));
+                let result = self.string_result(c, wide);
+                let dst = self.temp_string_like(&result);
                 // dst := first; then dst := CONCAT(dst, next) for the rest.
                 self.emit(|b| b.push_u32(dst));
                 self.string_arg_of(c.exprs[0], wide);
@@ -147,7 +113,7 @@ impl Gen<'_> {
                     self.emit(|b| b.call_builtin(pick(Builtin::StrConcat)));
                 }
                 self.emit(|b| b.push_u32(dst));
-                kind(len)
+                result
             }
 
             _ => unreachable!("std_string called for {}", c.name),
@@ -156,18 +122,36 @@ impl Gen<'_> {
     }
 
     /// The kind of string (a STRING or WSTRING of the default length) the string function
-    /// call `c` works on: the checking pass decides it by its first argument that is no
-    /// STRING literal ([`rules::string_kind`]) and records it
-    /// ([`crate::typed::GenericTypes`]); emission reads the record.
+    /// call `c` works on, as the checker decided it ([`crate::typed::GenericTypes`]).
     fn string_kind(&mut self, c: &StdArgs) -> Option<Type> {
-        if !self.check_only {
-            return self.recorded_generic_type(c.id);
+        self.recorded_generic_type(c.id)
+    }
+
+    /// The type of the string function call `c` on STRINGs (or, `wide`, WSTRINGs): INT for
+    /// LEN and FIND, else a string as long as its result may be.
+    pub(crate) fn string_result(&mut self, c: &StdArgs, wide: bool) -> Type {
+        let kind = |len: u32| {
+            if wide {
+                Type::WString(len)
+            } else {
+                Type::String(len)
+            }
+        };
+        match c.name {
+            "LEN" | "FIND" => Type::INT,
+            "INSERT" | "REPLACE" => kind(
+                (self.string_len_of(c.exprs[0]) + self.string_len_of(c.exprs[1]))
+                    .min(MAX_TEMP_STRING),
+            ),
+            "CONCAT" => kind(
+                c.exprs
+                    .iter()
+                    .map(|e| self.string_len_of(e))
+                    .sum::<u32>()
+                    .clamp(1, MAX_TEMP_STRING),
+            ),
+            _ => kind(self.string_len_of(c.exprs[0])),
         }
-        let first = c.exprs.iter().find(|e| !matches!(e.kind, ExprKind::Str(_)));
-        let first = first.map(|e| self.infer(e));
-        let kind = rules::string_kind(first.as_ref());
-        self.record_generic_type(c.id, kind.clone());
-        Some(kind)
     }
 
     pub(super) fn string_arg(&mut self, e: &Expr) {
@@ -181,32 +165,17 @@ impl Gen<'_> {
         } else {
             Type::String(DEFAULT_STRING_LEN)
         };
-        let t = self.expr(e, Some(&want));
-        let fits = if wide { t.is_wstring() } else { t.is_string() };
-        if self.check_only && !fits && !t.is_error() {
-            let msg = format!(
-                "expected a {}, found {}",
-                if wide { "WSTRING" } else { "STRING" },
-                self.tname(&t)
-            );
-            self.error(codes::TYPE_MISMATCH, e.span, msg);
-        }
+        self.expr(e, Some(&want));
     }
 
+    /// An integer argument (of any integer type), as LINT.
     pub(super) fn int_arg(&mut self, e: &Expr) {
         let t = self.infer(e);
-        if self.check_only && !t.is_integral() {
-            if !t.is_error() {
-                let msg = format!("expected an integer, found {}", self.tname(&t));
-                self.error(codes::TYPE_MISMATCH, e.span, msg);
-            }
-            self.expr(e, None);
-            return;
-        }
         self.value_to_any(e, &t, &Type::LINT);
     }
 
-    pub(super) fn string_len_of(&mut self, e: &Expr) -> u32 {
+    /// The length of the string `e` (the default length for anything else).
+    pub(crate) fn string_len_of(&mut self, e: &Expr) -> u32 {
         match self.infer(e) {
             Type::String(n) | Type::WString(n) => n,
             _ => DEFAULT_STRING_LEN,

@@ -43,7 +43,7 @@ pub(crate) fn call(
         Callee::Method(method) => crate::sema::class::method_call(g, method, callee, args, span),
         Callee::Function(pi) => static_call(g, *pi, args, span),
         Callee::Standard(n) => {
-            if let Some(t) = g.std_call(&n.name, n, args, expected, span) {
+            if let Some(t) = crate::sema::stdcall::std_call(g, &n.name, n, args, expected, span) {
                 return t;
             }
             let msg = format!("unknown function `{}`", n.text);

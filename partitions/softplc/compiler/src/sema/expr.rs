@@ -380,6 +380,12 @@ fn record_operation(
     None
 }
 
+/// Checks the operand `e` of type `from` where a value computed in `to` is wanted (its
+/// conversion was decided by the caller's rule).
+pub(crate) fn value_to_any(g: &mut Gen, e: &Expr, from: &Type, to: &Type) {
+    check(g, e, Some(operand_context(e, from, to)));
+}
+
 /// The type an operand `e` of type `from`, computed in `to`, is walked with: `to` when it
 /// adapts to its context (an untyped literal), else its own.
 pub(crate) fn operand_context<'t>(e: &Expr, from: &'t Type, to: &'t Type) -> &'t Type {

@@ -18,6 +18,7 @@ pub(crate) mod expr;
 pub mod ops;
 pub(crate) mod place;
 pub(crate) mod refs;
+pub(crate) mod stdcall;
 pub mod stdfuncs;
 pub(crate) mod stmt;
 
