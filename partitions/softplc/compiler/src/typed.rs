@@ -397,7 +397,10 @@ pub fn check(
 ) -> Checked {
     let mut checker = Gen::new(prog, unit, sources, diags);
     checker.check_only = true;
-    checker.generate();
+    crate::sema::init::check_initial_values(&mut checker);
+    for pou in 0..checker.prog.pous.len() {
+        crate::sema::stmt::check_pou(&mut checker, pou);
+    }
     let checked = Checked {
         types: std::mem::take(&mut checker.types),
         calls: std::mem::take(&mut checker.calls),

@@ -58,8 +58,8 @@ pub(crate) enum CallBase {
 }
 
 impl Gen<'_> {
-    /// A call, of the callee the checker recorded ([`Callee`]); in the checking pass, the
-    /// call checker checks it ([`crate::sema::call::call`]).
+    /// A call, of the callee the call checker recorded ([`Callee`];
+    /// [`crate::sema::call::call`]).
     pub(crate) fn call(
         &mut self,
         callee: &Expr,
@@ -67,9 +67,6 @@ impl Gen<'_> {
         expected: Option<&Type>,
         span: Span,
     ) -> Type {
-        if self.check_only {
-            return crate::sema::call::call(self, callee, args, expected, span);
-        }
         let Some(target) = self.callees.of(callee).cloned() else {
             self.missing_record(callee.span, "resolved no callee for this call");
             return Type::Error;
@@ -109,28 +106,16 @@ impl Gen<'_> {
         }
     }
 
-    /// The arguments of a call of `pi` at `span`, bound to its parameters (see
+    /// The arguments of a call of `pi`, bound to its parameters (see
     /// [`Gen::bind_to`]).
-    fn bind_args<'e>(&mut self, pi: usize, args: &'e [Arg], span: Span) -> Vec<Bound<'e>> {
+    fn bind_args<'e>(&mut self, pi: usize, args: &'e [Arg]) -> Vec<Bound<'e>> {
         let vars = self.prog.pous[pi].vars.clone();
-        self.bind_to(Some(pi), "", &vars, None, (args, span))
+        self.bind_to(&vars, args)
     }
 
-    /// The arguments `args` of a call at `span` bound to the parameters `vars` (in frame
-    /// order) as the checker recorded ([`Binding`]); in the checking pass, the call checker
-    /// binds them to the parameters of `pou_name` (the POU `pou`, if it is one; `result`
-    /// is its result variable) ([`crate::sema::call::bind`]).
-    pub(crate) fn bind_to<'e>(
-        &mut self,
-        pou: Option<usize>,
-        pou_name: &str,
-        vars: &[VarDef],
-        result: Option<&str>,
-        (args, span): (&'e [Arg], Span),
-    ) -> Vec<Bound<'e>> {
-        if self.check_only {
-            return crate::sema::call::bind(self, pou, pou_name, vars, result, (args, span));
-        }
+    /// The arguments `args` of a call bound to the parameters `vars` (in frame
+    /// order) as the call checker recorded ([`Binding`]; [`crate::sema::call::bind`]).
+    pub(crate) fn bind_to<'e>(&mut self, vars: &[VarDef], args: &'e [Arg]) -> Vec<Bound<'e>> {
         let Some(first) = args.first() else {
             return Vec::new();
         };
@@ -173,12 +158,12 @@ impl Gen<'_> {
                 }
             }
         };
-        let bound = self.bind_args(pi, args, span);
+        let bound = self.bind_args(pi, args);
         for a in bound.iter().filter(|a| !a.output) {
             if a.param.kind == VarKind::InOut {
                 let loc = member(self, a.param.offset);
                 self.record_inout(pi, &a.param.name, a.value);
-                self.inout_address(a.value, &a.param.ty);
+                self.inout_address(a.value);
                 let p = Place {
                     loc,
                     ty: Type::Elem(Elem::UDInt),
@@ -217,13 +202,9 @@ impl Gen<'_> {
         }
     }
 
-    /// Pushes the address of an in-out argument (a variable of the parameter's type `ty`);
-    /// in the checking pass, the call checker checks it
-    /// ([`crate::sema::call::in_out_argument`]).
-    pub(crate) fn inout_address(&mut self, e: &Expr, ty: &Type) {
-        if self.check_only {
-            return crate::sema::call::in_out_argument(self, e, ty);
-        }
+    /// Pushes the address of an in-out argument (a variable of the parameter's type, as the
+    /// call checker found it: [`crate::sema::call::in_out_argument`]).
+    pub(crate) fn inout_address(&mut self, e: &Expr) {
         self.sync_if_byte_viewed(e);
         let Some(p) = self.place(e) else {
             return self.emit(|b| b.push_i32(0));
@@ -231,12 +212,9 @@ impl Gen<'_> {
         self.addr_of(&p);
     }
 
-    /// `param => target` after a call: copies the output `src` into the target variable; in
-    /// the checking pass, the call checker checks it ([`crate::sema::call::output`]).
+    /// `param => target` after a call: copies the output `src` into the target variable (as
+    /// the call checker passed it: [`crate::sema::call::output`]).
     pub(crate) fn copy_out(&mut self, src: Place, target: &Expr) {
-        if self.check_only {
-            return crate::sema::call::output(self, &src, target);
-        }
         let Some(dst) = self.place(target) else {
             if matches!(src.loc, Loc::Ind(_)) {
                 self.op(Opcode::Drop);
@@ -281,8 +259,8 @@ impl Gen<'_> {
     }
 
     /// Calls FUNCTION, METHOD or property accessor `pi` (parameters through its static
-    /// frame) on `base`; in the checking pass, the call checker checks the call
-    /// ([`crate::sema::call::static_call`]).
+    /// frame) on `base` (as the call checker passed the call:
+    /// [`crate::sema::call::static_call`]).
     pub(crate) fn call_static(
         &mut self,
         pi: usize,
@@ -290,13 +268,10 @@ impl Gen<'_> {
         span: Span,
         base: CallBase,
     ) -> Type {
-        if self.check_only {
-            return crate::sema::call::static_call(self, pi, args, span);
-        }
         self.calls.push((self.cur, pi, span));
         let (frame, pristine) = self.frames.get(pi).copied().unwrap_or((Some(0), Some(0)));
         let (frame, pristine) = (frame.unwrap_or(0), pristine.unwrap_or(0));
-        let bound = self.bind_args(pi, args, span);
+        let bound = self.bind_args(pi, args);
         let inputs: Vec<&Bound> = bound.iter().filter(|b| !b.output).collect();
         // Evaluate all inputs first: a nested call of the same function must not clobber
         // parameters already stored in the shared static frame.
@@ -304,9 +279,9 @@ impl Gen<'_> {
             match a.param.kind {
                 VarKind::InOut => {
                     self.record_inout(pi, &a.param.name, a.value);
-                    self.inout_address(a.value, &a.param.ty)
+                    self.inout_address(a.value)
                 }
-                _ => self.input_value(a.value, &a.param.ty, None),
+                _ => self.input_value(a.value, &a.param.ty),
             }
         }
         for a in inputs.iter().rev() {
@@ -378,13 +353,9 @@ impl Gen<'_> {
     }
 
     /// Pushes the value of the input argument `e` for a parameter of type `ty` (a string's
-    /// or an aggregate's address); in the checking pass, the call checker checks it
-    /// ([`crate::sema::call::input_value`]: `kept_by` says which callee may keep a
-    /// reference passed).
-    pub(crate) fn input_value(&mut self, e: &Expr, ty: &Type, kept_by: Option<&str>) {
-        if self.check_only {
-            return crate::sema::call::input_value(self, e, ty, kept_by);
-        }
+    /// or an aggregate's address), as the call checker passed it
+    /// ([`crate::sema::call::input_value`]).
+    pub(crate) fn input_value(&mut self, e: &Expr, ty: &Type) {
         match ty {
             Type::String(_) | Type::WString(_) | Type::Array(_) | Type::Struct(_) => {
                 self.expr(e, Some(ty));

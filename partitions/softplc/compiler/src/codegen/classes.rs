@@ -384,7 +384,7 @@ impl Gen<'_> {
             }
         }
         self.emit(|b| b.st_abs(MemType::U64, instance));
-        let bound = self.bind_to(None, &d.label, &d.params, None, (args, span));
+        let bound = self.bind_to(&d.params, args);
         let inputs: Vec<&crate::codegen::calls::Bound> =
             bound.iter().filter(|b| !b.output).collect();
         for a in &inputs {
@@ -393,9 +393,9 @@ impl Gen<'_> {
                     for &t in &d.targets {
                         self.record_inout(t, &a.param.name, a.value);
                     }
-                    self.inout_address(a.value, &a.param.ty)
+                    self.inout_address(a.value)
                 }
-                _ => self.input_value(a.value, &a.param.ty, Some("an input of a method")),
+                _ => self.input_value(a.value, &a.param.ty),
             }
         }
         let frame = self.temp_cell();
@@ -486,7 +486,7 @@ impl Gen<'_> {
                 self.expr(&e, None);
             }
             (t, _) if scalar_mem(t).is_some() => {
-                let cell = self.default_cell(v).unwrap_or(0);
+                let cell = self.default_cell(v);
                 match t.elem() {
                     Some(Elem::Real) => self.emit(|b| b.push_f32(f32::from_bits(cell as u32))),
                     Some(Elem::LReal) => self.emit(|b| b.push_f64(f64::from_bits(cell))),
@@ -503,18 +503,16 @@ impl Gen<'_> {
     }
 
     /// The cell a parameter `v` of a scalar type starts with when a dynamic call leaves it
-    /// unconnected: its declared initial value, a constant (reported where it is not, or
-    /// does not fit), else 0 (for a reference: NULL).
-    pub(crate) fn default_cell(&mut self, v: &VarDef) -> Option<u64> {
+    /// unconnected: its declared initial value (a constant, as the checker found it), else
+    /// 0 (for a reference: NULL).
+    fn default_cell(&mut self, v: &VarDef) -> u64 {
         let (Some(Init::Expr(e)), Some(elem)) = (&v.init, v.ty.elem()) else {
-            return Some(0);
+            return 0;
         };
-        let Some(value) = self.const_value(e) else {
-            let msg = "initial value must be a constant expression";
-            self.error(codes::NOT_CONSTANT, e.span, msg);
-            return None;
-        };
-        self.const_cell(&value, &v.ty, elem, e.span)
+        let value = self.const_value(e);
+        value
+            .and_then(|value| self.const_cell(&value, &v.ty, elem, e.span))
+            .unwrap_or(0)
     }
 
     /// Pushes a method's result from the frame whose address is on the stack (`off` into

@@ -8,26 +8,24 @@ use crate::sema::expr::{
 use crate::sema::ops::{Operation, UnaryRule};
 
 impl Gen<'_> {
-    /// Type of an expression without emitting code or reporting errors. The checking pass
-    /// infers it ([`crate::sema::expr::infer`]) and records it; the emission pass only reads
-    /// the record: a missing one is an internal error.
+    /// Type of an expression without emitting code or reporting errors: the record of it
+    /// (a missing one is an internal error). The lookups both passes share (a receiver, a
+    /// string's length, SIZEOF's operand, a reference operation's operands) ask here; in the
+    /// checking pass the expression checker infers the type ([`crate::sema::expr::infer`]).
     pub(crate) fn infer(&mut self, e: &Expr) -> Type {
-        if let Some(t) = self.types.of(e) {
-            return t.clone();
-        }
         if self.check_only {
             return crate::sema::expr::infer(self, e);
+        }
+        if let Some(t) = self.types.of(e) {
+            return t.clone();
         }
         self.missing_record(e.span, "recorded no type for this expression");
         Type::Error
     }
 
-    /// Compiles `e` and converts the result to `to` (implicit conversions only); in the
-    /// checking pass, the expression checker checks it ([`crate::sema::expr::value_to`]).
+    /// Compiles `e` and converts the result to `to` (implicit conversions only, as the
+    /// expression checker passed them: [`crate::sema::expr::value_to`]).
     pub(crate) fn value_to(&mut self, e: &Expr, to: &Type) {
-        if self.check_only {
-            return crate::sema::expr::value_to(self, e, to);
-        }
         if to.is_pointer_like() && matches!(e.kind, ExprKind::Int(0)) {
             // The literal 0 is NULL.
             self.push_int(0);
@@ -49,12 +47,8 @@ impl Gen<'_> {
     }
 
     /// Emits the implicit conversion of `e` from `from` to `to` the checker decided
-    /// ([`crate::typed::Coercions`]); in the checking pass, the expression checker decides
-    /// it ([`crate::sema::expr::coerce`]).
+    /// ([`crate::typed::Coercions`]; [`crate::sema::expr::coerce`]).
     pub(crate) fn coerce(&mut self, from: &Type, to: &Type, e: &Expr) {
-        if self.check_only {
-            return crate::sema::expr::coerce(self, from, to, e);
-        }
         if from.is_error() || to.is_error() || from == to {
             return;
         }
@@ -239,12 +233,8 @@ impl Gen<'_> {
     }
 
     /// Compiles an expression; `expected` guides the typing of untyped literals (as the
-    /// checker typed them). In the checking pass, the expression checker walks it
-    /// ([`crate::sema::expr`]).
+    /// expression checker typed them: [`crate::sema::expr`]).
     pub(crate) fn expr(&mut self, e: &Expr, expected: Option<&Type>) -> Type {
-        if self.check_only {
-            return crate::sema::expr::check(self, e, expected);
-        }
         match &e.kind {
             ExprKind::Error => Type::Error,
             ExprKind::Int(v) => self.int_literal(*v as i128, expected, e.span),

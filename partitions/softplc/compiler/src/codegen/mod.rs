@@ -197,7 +197,7 @@ pub(crate) struct Gen<'a> {
 }
 
 /// Constants visible in the POU being compiled.
-struct PouConsts<'p> {
+pub(crate) struct PouConsts<'p> {
     prog: &'p Program,
     vars: &'p [VarDef],
 }
@@ -415,9 +415,14 @@ impl<'a> Gen<'a> {
     }
 
     fn consts(&self) -> PouConsts<'_> {
+        self.pou_consts(self.cur)
+    }
+
+    /// The constants visible in POU `p` (its own and the global ones).
+    pub(crate) fn pou_consts(&self, p: usize) -> PouConsts<'_> {
         PouConsts {
             prog: self.prog,
-            vars: &self.prog.pous[self.cur].vars,
+            vars: &self.prog.pous[p].vars,
         }
     }
 
@@ -494,9 +499,7 @@ impl<'a> Gen<'a> {
         self.loops.clear();
         self.try_depth = 0;
         let id = self.pou_ids[i];
-        if !self.check_only {
-            self.b.begin_pou(id);
-        }
+        self.b.begin_pou(id);
         let source = crate::classes::pou_source(self.unit, &self.prog.pous[i]);
         self.set_location(source.name.span);
         if let Some(pr) = pristine {
@@ -520,18 +523,11 @@ impl<'a> Gen<'a> {
         self.return_label = Some(ret);
         let body = source.body;
         self.scan_byte_views(body);
-        if self.check_only {
-            crate::sema::refs::scan_temporary_references(self, body);
-            crate::sema::stmt::check_body(self, body);
-        } else {
-            self.stmts(body);
-        }
+        self.stmts(body);
         self.bind(ret);
         self.sync_byte_views_on_return();
         self.emit(|b| b.ret());
-        if !self.check_only {
-            self.b.end_pou(id);
-        }
+        self.b.end_pou(id);
     }
 }
 

@@ -8,8 +8,8 @@ use crate::sema::expr::{operand_context, operand_types};
 use crate::sema::ops::{BinaryRule, Operation};
 
 impl Gen<'_> {
-    /// Emits `a op b` as the checker decided it ([`crate::typed::Operations`]); in the
-    /// checking pass, the expression checker checks it ([`crate::sema::expr::binary`]).
+    /// Emits `a op b` as the expression checker decided it ([`crate::typed::Operations`];
+    /// [`crate::sema::expr::binary`]).
     pub(crate) fn binary(
         &mut self,
         op: BinOp,
@@ -18,9 +18,6 @@ impl Gen<'_> {
         expected: Option<&Type>,
         span: Span,
     ) -> Type {
-        if self.check_only {
-            return crate::sema::expr::binary(self, op, a, b, expected, span);
-        }
         if self.is_pointer_operation(a, b) {
             return self.pointer_binary(op, a, b, expected, span);
         }

@@ -152,12 +152,8 @@ pub(crate) fn element_offsets(
 impl Gen<'_> {
     /// Emits the access to the place `e` as far as its address (for dynamic places the base
     /// address is pushed; a place reached through a reference is checked here, for the
-    /// bytes of its type). In the checking pass, the place checker checks it
-    /// ([`crate::sema::place::place`]).
+    /// bytes of its type), as the place checker passed it ([`crate::sema::place::place`]).
     pub(crate) fn place(&mut self, e: &Expr) -> Option<Place> {
-        if self.check_only {
-            return crate::sema::place::place(self, e);
-        }
         let p = self.place_inner(e)?;
         Some(self.finalize_place(p))
     }

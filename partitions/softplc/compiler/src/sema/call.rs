@@ -418,7 +418,7 @@ pub(crate) fn input_value(g: &mut Gen, e: &Expr, ty: &Type, kept_by: Option<&str
 /// Checks the in-out argument `e` for a parameter of type `ty`: a whole variable of that
 /// type.
 pub(crate) fn in_out_argument(g: &mut Gen, e: &Expr, ty: &Type) {
-    g.sync_if_byte_viewed(e);
+    crate::sema::expr::sync_if_byte_viewed(g, e);
     let Some(p) = place(g, e) else {
         return;
     };

@@ -12,12 +12,13 @@
 //! method's frame layout) is looked up by the code generator's helpers, one for both
 //! passes.
 
-use crate::ast::{Arg, Expr, ExprKind, Ident, VarKind};
+use crate::ast::{Arg, Expr, ExprKind, Ident, Init, VarKind};
 use crate::codegen::{Dynamic, Gen, Loc, Place, scalar_mem};
 use crate::codes;
 use crate::diagnostics::Span;
 use crate::sema::call::{bind, in_out_argument, input_value, output, static_call};
 use crate::sema::expr::check;
+use crate::sema::init::const_cell;
 use crate::sema::place::place;
 use crate::sema::refs::record_in_out_root;
 use crate::sema::{Access, Member, MemberKind};
@@ -189,8 +190,18 @@ fn dynamic_call(g: &mut Gen, base: Option<&Expr>, d: Dynamic, args: &[Arg], span
             && !bound.iter().any(|b| b.param.name == v.name)
             && scalar_mem(&v.ty).is_some()
             && !g.dry
+            && let Some(Init::Expr(e)) = &v.init
+            && let Some(elem) = v.ty.elem()
         {
-            g.default_cell(v);
+            match g.const_value(e) {
+                Some(value) => {
+                    const_cell(g, &value, &v.ty, elem, e.span);
+                }
+                None => {
+                    let msg = "initial value must be a constant expression";
+                    g.error(codes::NOT_CONSTANT, e.span, msg);
+                }
+            }
         }
     }
     for a in bound.iter().filter(|a| a.output) {

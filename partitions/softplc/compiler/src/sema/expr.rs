@@ -65,13 +65,18 @@ pub(crate) fn check(g: &mut Gen, e: &Expr, expected: Option<&Type>) -> Type {
         | ExprKind::Index(..)
         | ExprKind::Deref(..)
         | ExprKind::Bits { .. } => place(g, e).map_or(Type::Error, |p| p.ty),
-        ExprKind::Call { callee, args } => g.call(callee, args, expected, e.span),
+        ExprKind::Call { callee, args } => {
+            crate::sema::call::call(g, callee, args, expected, e.span)
+        }
     }
 }
 
 /// The type of `e` where nothing is expected of it, from a walk that reports nothing; it is
-/// recorded for emission ([`crate::typed::ExprTypes`]).
+/// recorded for emission ([`crate::typed::ExprTypes`]), once.
 pub(crate) fn infer(g: &mut Gen, e: &Expr) -> Type {
+    if let Some(t) = g.types.of(e) {
+        return t.clone();
+    }
     let saved = g.dry;
     g.dry = true;
     let t = check(g, e, None);
@@ -172,7 +177,7 @@ fn typed_literal(g: &mut Gen, ty: &Ident, inner: &Expr, span: Span) -> Type {
         if g.dry {
             return t;
         }
-        return match g.const_cell(&v, &t, elem, span) {
+        return match crate::sema::init::const_cell(g, &v, &t, elem, span) {
             Some(_) => t,
             None => Type::Error,
         };
@@ -213,10 +218,32 @@ fn bare_name(g: &mut Gen, e: &Expr, n: &Ident, expected: Option<&Type>) -> Type 
         Bare::EnumValue { ty, .. } => Type::Enum(ty),
         Bare::Exception(_) => Type::Exception,
         Bare::Variable => {
-            g.sync_if_byte_viewed(e);
+            sync_if_byte_viewed(g, e);
             place(g, e).map_or(Type::Error, |p| p.ty)
         }
     }
+}
+
+/// Checks the place of the STRING variable `e` names when its text is reached through byte
+/// pointers (emission re-reads its length before the read): the variable is recorded.
+pub(crate) fn sync_if_byte_viewed(g: &mut Gen, e: &Expr) {
+    let ExprKind::Name(n) = &e.kind else { return };
+    if g.dry || !g.refs.byte_viewed.contains(&n.name) {
+        return;
+    }
+    sync_records(g, n);
+}
+
+/// Records the variable `n` (a STRING reached through byte pointers) the way emission
+/// re-reads its length: a place of its own, with no further re-reading inside.
+pub(crate) fn sync_records(g: &mut Gen, n: &Ident) {
+    let saved = std::mem::take(&mut g.refs.byte_viewed);
+    let name = Expr {
+        kind: ExprKind::Name(n.clone()),
+        span: n.span,
+    };
+    place(g, &name);
+    g.refs.byte_viewed = saved;
 }
 
 /// What bare name `n` denotes in the POU walked, `expected` being the type its context

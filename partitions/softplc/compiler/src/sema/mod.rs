@@ -15,6 +15,7 @@ pub(crate) mod call;
 pub(crate) mod class;
 mod config;
 pub(crate) mod expr;
+pub(crate) mod init;
 pub mod ops;
 pub(crate) mod place;
 pub(crate) mod refs;

@@ -22,7 +22,9 @@ use crate::codegen::{Gen, Loc, Place};
 use crate::codes;
 use crate::diagnostics::Span;
 use crate::sema::ConstVal;
-use crate::sema::refs::{check_escape, make_reference, reference_to};
+use crate::sema::expr::{check, coerce, sync_records, value_to};
+use crate::sema::place::place;
+use crate::sema::refs::{check_escape, make_reference, reference_to, scan_temporary_references};
 use crate::types::Type;
 
 /// Checks the statements of the body of the POU `g` is at (`g` in its checking mode).
@@ -30,11 +32,30 @@ pub(crate) fn check_body(g: &mut Gen, body: &[Stmt]) {
     BodyChecker { g, loops: 0 }.stmts(body);
 }
 
+/// Checks the body of POU `pou` (and records what emission needs of it).
+pub(crate) fn check_pou(g: &mut Gen, pou: usize) {
+    g.cur = pou;
+    let unit = g.unit;
+    let body = crate::classes::pou_source(unit, &g.prog.pous[pou]).body;
+    g.scan_byte_views(body);
+    scan_temporary_references(g, body);
+    check_body(g, body);
+    // Emission re-reads the length of the strings written through byte pointers on return.
+    for name in g.refs.byte_viewed.clone() {
+        let id = Ident {
+            text: name.clone(),
+            name,
+            span: Span::default(),
+        };
+        sync_records(g, &id);
+    }
+}
+
 /// Checks storing `value` into `p`: an assignment's value or a function block's input.
 pub(crate) fn check_store(g: &mut Gen, p: &Place, value: &Expr, span: Span) {
     match &p.ty {
         Type::String(_) | Type::WString(_) => {
-            let t = g.expr(value, Some(&p.ty));
+            let t = check(g, value, Some(&p.ty));
             let wide = p.ty.is_wstring();
             let text = t.is_string() || t.is_wstring();
             if (t.is_wstring() != wide || !text) && !t.is_error() {
@@ -48,7 +69,7 @@ pub(crate) fn check_store(g: &mut Gen, p: &Place, value: &Expr, span: Span) {
             }
         }
         Type::Array(_) | Type::Struct(_) | Type::Fb(_) => {
-            let t = g.expr(value, Some(&p.ty));
+            let t = check(g, value, Some(&p.ty));
             if t != p.ty && !t.is_error() {
                 let msg = format!("cannot assign {} to {}", g.tname(&t), g.tname(&p.ty));
                 g.error(codes::ASSIGN_TYPE, value.span, msg);
@@ -64,7 +85,7 @@ pub(crate) fn check_store(g: &mut Gen, p: &Place, value: &Expr, span: Span) {
         Type::Error | Type::Void => {
             g.infer(value);
         }
-        ty => g.value_to(value, &ty.clone()),
+        ty => value_to(g, value, &ty.clone()),
     }
 }
 
@@ -87,7 +108,7 @@ impl BodyChecker<'_, '_> {
             StmtKind::Assign { target, value } => self.assign(target, value),
             StmtKind::RefAssign { target, value } => self.ref_assign(target, value),
             StmtKind::Call(e) => {
-                self.g.expr(e, None);
+                check(self.g, e, None);
             }
             StmtKind::If {
                 branches,
@@ -106,7 +127,7 @@ impl BodyChecker<'_, '_> {
                 arms,
                 else_body,
             } => {
-                let st = self.g.expr(selector, None);
+                let st = check(self.g, selector, None);
                 self.case_labels(selector, &st, arms);
                 if let Some(e) = else_body {
                     self.stmts(e);
@@ -161,7 +182,7 @@ impl BodyChecker<'_, '_> {
     }
 
     fn condition(&mut self, e: &Expr) {
-        let t = self.g.expr(e, Some(&Type::BOOL));
+        let t = check(self.g, e, Some(&Type::BOOL));
         if !t.is_error() && t != Type::BOOL {
             let msg = format!("condition must be BOOL, found {}", self.g.tname(&t));
             self.g.error(codes::TYPE_MISMATCH, e.span, msg);
@@ -173,7 +194,7 @@ impl BodyChecker<'_, '_> {
             kind: ExprKind::Name(v.clone()),
             span: v.span,
         };
-        let Some(p) = self.g.place(&e) else { return };
+        let Some(p) = place(self.g, &e) else { return };
         if !matches!(p.ty, Type::Exception) && !p.ty.elem().is_some_and(|e| e.is_integral()) {
             let msg = format!(
                 "exception variable must be declared `: __EXCEPTION`, not {}",
@@ -259,7 +280,7 @@ impl BodyChecker<'_, '_> {
         let Some(vty) = self.for_control_variable(var) else {
             return;
         };
-        self.g.value_to(from, &vty);
+        value_to(self.g, from, &vty);
         let step = match by {
             None => Some(ConstVal::Int(1)),
             Some(e) => self.g.const_value(e),
@@ -271,11 +292,11 @@ impl BodyChecker<'_, '_> {
                 "FOR step must not be zero",
             );
         }
-        self.g.value_to(to, &vty);
+        value_to(self.g, to, &vty);
         if let Some(e) = by
             && !matches!(step, Some(ConstVal::Int(_)))
         {
-            self.g.value_to(e, &vty);
+            value_to(self.g, e, &vty);
         }
         self.loop_body(body);
     }
@@ -287,7 +308,7 @@ impl BodyChecker<'_, '_> {
             kind: ExprKind::Name(var.clone()),
             span: var.span,
         };
-        let vp = self.g.place(&ve)?;
+        let vp = place(self.g, &ve)?;
         if !vp.ty.elem().is_some_and(|e| e.is_integral()) || matches!(vp.ty, Type::Enum(_)) {
             let msg = format!(
                 "FOR control variable must be an integer, found {}",
@@ -311,7 +332,7 @@ impl BodyChecker<'_, '_> {
         if crate::sema::class::property_write(self.g, target, value) {
             return;
         }
-        let Some(p) = self.g.place(target) else {
+        let Some(p) = place(self.g, target) else {
             self.g.infer(value);
             return;
         };
@@ -332,7 +353,7 @@ impl BodyChecker<'_, '_> {
     /// NULL).
     fn ref_assign(&mut self, target: &Expr, value: &Expr) {
         let saved = std::mem::replace(&mut self.g.refs.keep_reference, true);
-        let p = self.g.place(target);
+        let p = place(self.g, target);
         self.g.refs.keep_reference = saved;
         let Some(p) = p else {
             self.g.infer(value);
@@ -356,6 +377,6 @@ impl BodyChecker<'_, '_> {
         check_escape(self.g, Some(target), &as_ref, "this variable");
         let ty = Type::Ref(t);
         let rt = make_reference(self.g, value, Some(&ty));
-        self.g.coerce(&rt, &ty, value);
+        coerce(self.g, &rt, &ty, value);
     }
 }
