@@ -13,11 +13,10 @@ impl Gen<'_> {
         init: Option<&Init>,
         scope_pou: Option<usize>,
     ) {
-        let size = self.prog.size_align(ty).0;
-        if self.prog.data_overflow || addr.saturating_add(size) > crate::sema::MAX_DATA {
+        if self.prog.beyond_data(addr, ty) {
             return;
         }
-        self.ensure_init(addr + size);
+        self.ensure_init(addr + self.prog.size_align(ty).0);
         match ty {
             Type::Elem(_) | Type::Subrange(..) | Type::Enum(_) | Type::Exception => {
                 let elem = ty.elem().unwrap_or(Elem::DInt);
@@ -105,21 +104,7 @@ impl Gen<'_> {
         let Type::Array(a) = ty else { return };
         let stride = self.prog.stride(&a.elem);
         let count = a.len();
-        let mut values: Vec<Option<&Init>> = Vec::new();
-        match init {
-            Some(Init::Array(items, _)) => {
-                for it in items {
-                    for _ in 0..it.repeat {
-                        if values.len() as u64 >= count {
-                            break;
-                        }
-                        values.push(it.value.as_ref());
-                    }
-                }
-            }
-            Some(i @ Init::Expr(_)) if count == 1 => values.push(Some(i)),
-            _ => {}
-        }
+        let values = crate::sema::init::array_init_values(init, count);
         let elem = a.elem.clone();
         for i in 0..count {
             let v = values.get(i as usize).copied().flatten();
@@ -137,11 +122,7 @@ impl Gen<'_> {
             _ => Vec::new(),
         };
         for m in &members {
-            let given = fields
-                .iter()
-                .find(|(n, _)| n.name == m.name)
-                .map(|(_, i)| i.clone());
-            let v = given.or_else(|| m.init.clone());
+            let v = crate::sema::init::member_init(&fields, m);
             self.write_init(addr + m.offset, &m.ty, v.as_ref(), None);
         }
     }
@@ -165,11 +146,7 @@ impl Gen<'_> {
             if matches!(v.kind, VarKind::External | VarKind::Global | VarKind::InOut) {
                 continue;
             }
-            let given = fields
-                .iter()
-                .find(|(n, _)| n.name == v.name)
-                .map(|(_, i)| i.clone());
-            let iv = given.or_else(|| v.init.clone());
+            let iv = crate::sema::init::member_init(&fields, v);
             self.write_init(addr + v.offset, &v.ty, iv.as_ref(), Some(*pi));
         }
     }

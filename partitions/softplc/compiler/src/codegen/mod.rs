@@ -31,7 +31,7 @@ pub(crate) use place::element_offsets;
 mod refs;
 pub(crate) use refs::PointerOperation;
 mod stdfuncs;
-pub(crate) use stdfuncs::{MAX_TEMP_STRING, StdArgs, TimeFunction, split_arguments};
+pub(crate) use stdfuncs::{MAX_TEMP_STRING, StdArgs, StdFamily, TimeFunction, split_arguments};
 mod stmt;
 mod strings;
 

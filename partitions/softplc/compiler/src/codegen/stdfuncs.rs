@@ -44,6 +44,60 @@ pub(crate) struct StdArgs<'e> {
     pub(crate) typed: Option<Elem>,
 }
 
+impl<'e> StdArgs<'e> {
+    /// A call of `name` (of its typed form of type `typed`, if it is one: `SQRT` and
+    /// `LREAL` for `SQRT_LREAL`) by `id` with the arguments `exprs` in the order of its
+    /// inputs, `ctx` being the numeric type the context asks of literal-only arguments.
+    pub(crate) fn new(
+        (name, typed): (&'e str, Option<Elem>),
+        id: &'e Ident,
+        exprs: Vec<&'e Expr>,
+        ctx: Option<Type>,
+        span: Span,
+    ) -> Self {
+        StdArgs {
+            name,
+            id,
+            exprs,
+            ctx: typed.map(Type::Elem).or(ctx),
+            span,
+            typed,
+        }
+    }
+}
+
+/// A family of standard functions (a function of its own checks and emits each).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum StdFamily {
+    /// SQRT and the other REAL functions, EXPT, ATAN2, ABS, TRUNC and the typed
+    /// truncations, __NOW, TIME, LTIME.
+    Numeric,
+    /// MOVE, SEL, MAX, MIN, LIMIT, MUX.
+    Selection,
+    /// SHL, SHR, ROL, ROR.
+    Bits,
+    /// LEN, LEFT, RIGHT, MID, DELETE, INSERT, REPLACE, FIND, CONCAT.
+    Strings,
+    /// `A_TO_B` (anything else is looked up there).
+    Conversion,
+}
+
+impl StdFamily {
+    /// The family of the standard function `name` (without a typed form's suffix).
+    pub(crate) fn of(name: &str) -> StdFamily {
+        match name {
+            "SQRT" | "LN" | "LOG" | "EXP" | "SIN" | "COS" | "TAN" | "ASIN" | "ACOS" | "ATAN"
+            | "EXPT" | "ABS" | "TRUNC" | "__NOW" | "ATAN2" | "TIME" | "LTIME" => StdFamily::Numeric,
+            _ if Gen::typed_trunc(name).is_some() => StdFamily::Numeric,
+            "MOVE" | "SEL" | "MAX" | "MIN" | "LIMIT" | "MUX" => StdFamily::Selection,
+            "SHL" | "SHR" | "ROL" | "ROR" => StdFamily::Bits,
+            "LEN" | "LEFT" | "RIGHT" | "MID" | "DELETE" | "INSERT" | "REPLACE" | "FIND"
+            | "CONCAT" => StdFamily::Strings,
+            _ => StdFamily::Conversion,
+        }
+    }
+}
+
 /// The input and the output targets (one per part of `parts`) of a SPLIT_ call with the
 /// arguments `args`, given formally (`YEAR => y`) or in order after the input, and the
 /// arguments that are neither (an unknown output, or anything else).
@@ -172,25 +226,13 @@ impl Gen<'_> {
         let Some(exprs) = self.std_arguments(id, args) else {
             return Some(Type::Error);
         };
-        let c = StdArgs {
-            name,
-            id,
-            exprs,
-            ctx: typed.map(Type::Elem).or(ctx),
-            span,
-            typed,
-        };
-        match name {
-            "SQRT" | "LN" | "LOG" | "EXP" | "SIN" | "COS" | "TAN" | "ASIN" | "ACOS" | "ATAN"
-            | "EXPT" | "ABS" | "TRUNC" | "__NOW" | "ATAN2" | "TIME" | "LTIME" => {
-                self.std_numeric(&c)
-            }
-            _ if Self::typed_trunc(name).is_some() => self.std_numeric(&c),
-            "MOVE" | "SEL" | "MAX" | "MIN" | "LIMIT" | "MUX" => self.std_selection(&c),
-            "SHL" | "SHR" | "ROL" | "ROR" => self.std_bits(&c),
-            "LEN" | "LEFT" | "RIGHT" | "MID" | "DELETE" | "INSERT" | "REPLACE" | "FIND"
-            | "CONCAT" => self.std_string(&c),
-            _ => self.conversion(name, id, &c.exprs, span),
+        let c = StdArgs::new((name, typed), id, exprs, ctx, span);
+        match StdFamily::of(name) {
+            StdFamily::Numeric => self.std_numeric(&c),
+            StdFamily::Selection => self.std_selection(&c),
+            StdFamily::Bits => self.std_bits(&c),
+            StdFamily::Strings => self.std_string(&c),
+            StdFamily::Conversion => self.conversion(name, id, &c.exprs, span),
         }
     }
 
@@ -614,15 +656,20 @@ impl Gen<'_> {
             // `TIME()` (CODESYS): the time since the PLC started, here the cycle time.
             "__NOW" | "TIME" | "LTIME" => {
                 self.op(Opcode::Now);
-                if c.name == "LTIME" {
-                    Type::Elem(Elem::LTime)
-                } else {
-                    Type::TIME
-                }
+                Self::clock_type(c.name)
             }
             _ => unreachable!("std_numeric called for {}", c.name),
         };
         Some(t)
+    }
+
+    /// The type `__NOW()`, `TIME()` or `LTIME()` (`name`) gives.
+    pub(crate) fn clock_type(name: &str) -> Type {
+        if name == "LTIME" {
+            Type::Elem(Elem::LTime)
+        } else {
+            Type::TIME
+        }
     }
 
     /// The type TRUNC (or a typed truncation, `REAL_TRUNC_INT`) of the call `c` converts

@@ -208,15 +208,7 @@ fn instance_body_call(g: &mut Gen, inst: &Place, pi: usize, args: &[Arg], span: 
         }
         crate::sema::stmt::check_store(g, &p, a.value, a.value.span);
     }
-    for a in bound.iter().filter(|a| a.output) {
-        let src = Place {
-            loc: member(a.param.offset),
-            ty: a.param.ty.clone(),
-            writable: false,
-            window: None,
-        };
-        output(g, &src, a.value);
-    }
+    outputs(g, &bound, member);
 }
 
 /// Checks a call of FUNCTION, METHOD or property accessor `pi` (parameters through its
@@ -233,16 +225,8 @@ pub(crate) fn static_call(g: &mut Gen, pi: usize, args: &[Arg], span: Span) -> T
             _ => input_value(g, a.value, &a.param.ty, None),
         }
     }
-    for a in bound.iter().filter(|a| a.output) {
-        // The outputs are in the callee's static frame.
-        let src = Place {
-            loc: Loc::Abs(a.param.offset),
-            ty: a.param.ty.clone(),
-            writable: false,
-            window: None,
-        };
-        output(g, &src, a.value);
-    }
+    // The outputs are in the callee's static frame.
+    outputs(g, &bound, Loc::Abs);
     g.prog.pous[pi].return_type.clone().unwrap_or(Type::Void)
 }
 
@@ -435,6 +419,20 @@ pub(crate) fn in_out_argument(g: &mut Gen, e: &Expr, ty: &Type) {
             g.tname(&p.ty)
         );
         g.error(codes::IN_OUT_ARGUMENT, e.span, msg);
+    }
+}
+
+/// Checks the outputs `param => target` of a call whose arguments are bound as `bound`, each
+/// output lying where `loc` says by its offset in the callee's frame.
+pub(crate) fn outputs(g: &mut Gen, bound: &[Bound], loc: impl Fn(u32) -> Loc) {
+    for a in bound.iter().filter(|a| a.output) {
+        let src = Place {
+            loc: loc(a.param.offset),
+            ty: a.param.ty.clone(),
+            writable: false,
+            window: None,
+        };
+        output(g, &src, a.value);
     }
 }
 

@@ -13,10 +13,10 @@
 //! passes.
 
 use crate::ast::{Arg, Expr, ExprKind, Ident, Init, VarKind};
-use crate::codegen::{Dynamic, Gen, Loc, Place, scalar_mem};
+use crate::codegen::{Dynamic, Gen, Loc, scalar_mem};
 use crate::codes;
 use crate::diagnostics::Span;
-use crate::sema::call::{bind, in_out_argument, input_value, output, static_call};
+use crate::sema::call::{bind, in_out_argument, input_value, outputs, static_call};
 use crate::sema::expr::check;
 use crate::sema::init::const_cell;
 use crate::sema::place::place;
@@ -204,15 +204,7 @@ fn dynamic_call(g: &mut Gen, base: Option<&Expr>, d: Dynamic, args: &[Arg], span
             }
         }
     }
-    for a in bound.iter().filter(|a| a.output) {
-        let src = Place {
-            loc: Loc::Ind(a.param.offset),
-            ty: a.param.ty.clone(),
-            writable: false,
-            window: None,
-        };
-        output(g, &src, a.value);
-    }
+    outputs(g, &bound, Loc::Ind);
     d.result.map_or(Type::Void, |(t, _)| t)
 }
 

@@ -13,7 +13,7 @@ use crate::ast::{Expr, ExprKind, Ident, Init, PouKind, VarKind};
 use crate::codegen::Gen;
 use crate::codes::{self, Code};
 use crate::diagnostics::Span;
-use crate::sema::{ConstVal, Program, const_eval};
+use crate::sema::{ConstVal, Program, VarDef, const_eval};
 use crate::types::{Elem, Type, implicit_ok};
 
 /// Checks the initial values of the globals, the program instances and the frames of the
@@ -45,8 +45,7 @@ pub(crate) fn check_init(
     init: Option<&Init>,
     scope_pou: Option<usize>,
 ) {
-    let size = g.prog.size_align(ty).0;
-    if g.prog.data_overflow || addr.saturating_add(size) > crate::sema::MAX_DATA {
+    if g.prog.beyond_data(addr, ty) {
         return;
     }
     match ty {
@@ -92,8 +91,8 @@ pub(crate) fn check_init(
             let span = init.map(|i| i.span()).unwrap_or_default();
             const_cell(g, &value, ty, elem, span);
         }
-        Type::WString(_) => check_wstring_init(g, ty, init),
-        Type::String(_) => check_string_init(g, ty, init),
+        Type::WString(_) => check_text_init(g, "WSTRING", init),
+        Type::String(_) => check_text_init(g, "STRING", init),
         Type::Array(_) => check_array_init(g, addr, ty, init, scope_pou),
         Type::Struct(_) => check_struct_init(g, addr, ty, init),
         Type::Fb(_) => check_fb_init(g, addr, ty, init),
@@ -117,58 +116,18 @@ pub(crate) fn check_init(
     }
 }
 
-/// [`check_init`] of a WSTRING.
-fn check_wstring_init(g: &mut Gen, ty: &Type, init: Option<&Init>) {
-    let Type::WString(_) = ty else { return };
-    match init {
+/// [`check_init`] of a STRING or (`kind` "WSTRING") a WSTRING: a string literal.
+fn check_text_init(g: &mut Gen, kind: &str, init: Option<&Init>) {
+    let span = match init {
         Some(Init::Expr(e)) => match const_eval(g.prog, &(), e) {
-            Some(ConstVal::Str(s)) => s,
-            _ => {
-                g.diags.error(
-                    codes::STRING_INITIAL_VALUE,
-                    e.span,
-                    "WSTRING initial value must be a string literal",
-                );
-                String::new()
-            }
+            Some(ConstVal::Str(_)) => return,
+            _ => e.span,
         },
-        Some(other) => {
-            g.diags.error(
-                codes::STRING_INITIAL_VALUE,
-                other.span(),
-                "WSTRING initial value must be a string literal",
-            );
-            String::new()
-        }
-        None => String::new(),
+        Some(other) => other.span(),
+        None => return,
     };
-}
-
-/// [`check_init`] of a STRING.
-fn check_string_init(g: &mut Gen, ty: &Type, init: Option<&Init>) {
-    let Type::String(_) = ty else { return };
-    match init {
-        Some(Init::Expr(e)) => match const_eval(g.prog, &(), e) {
-            Some(ConstVal::Str(s)) => s,
-            _ => {
-                g.diags.error(
-                    codes::STRING_INITIAL_VALUE,
-                    e.span,
-                    "STRING initial value must be a string literal",
-                );
-                String::new()
-            }
-        },
-        Some(other) => {
-            g.diags.error(
-                codes::STRING_INITIAL_VALUE,
-                other.span(),
-                "STRING initial value must be a string literal",
-            );
-            String::new()
-        }
-        None => String::new(),
-    };
+    let msg = format!("{kind} initial value must be a string literal");
+    g.diags.error(codes::STRING_INITIAL_VALUE, span, msg);
 }
 
 /// [`check_init`] of an array.
@@ -182,17 +141,9 @@ fn check_array_init(
     let Type::Array(a) = ty else { return };
     let stride = g.prog.stride(&a.elem);
     let count = a.len();
-    let mut values: Vec<Option<&Init>> = Vec::new();
+    let values = array_init_values(init, count);
     match init {
         Some(Init::Array(items, span)) => {
-            for it in items {
-                for _ in 0..it.repeat {
-                    if values.len() as u64 >= count {
-                        break;
-                    }
-                    values.push(it.value.as_ref());
-                }
-            }
             let given: u64 = items.iter().map(|i| i.repeat).sum();
             if given > count {
                 g.diags.error(
@@ -202,7 +153,7 @@ fn check_array_init(
                 );
             }
         }
-        Some(i @ Init::Expr(_)) if count == 1 => values.push(Some(i)),
+        Some(Init::Expr(_)) if count == 1 => {}
         Some(other) => {
             g.diags.error(
                 codes::INITIAL_VALUE_SHAPE,
@@ -224,18 +175,8 @@ fn check_array_init(
 fn check_struct_init(g: &mut Gen, addr: u32, ty: &Type, init: Option<&Init>) {
     let Type::Struct(si) = ty else { return };
     let members = g.prog.structs[*si].members.clone();
-    let fields: Vec<(Ident, Init)> = match init {
-        Some(Init::Struct(f, _)) => f.clone(),
-        Some(other) => {
-            g.diags.error(
-                codes::INITIAL_VALUE_SHAPE,
-                other.span(),
-                "structure initial value must be written `(member := value, ...)`",
-            );
-            Vec::new()
-        }
-        None => Vec::new(),
-    };
+    let what = "structure initial value must be written `(member := value, ...)`";
+    let fields = init_fields(g, init, what);
     for (n, _) in &fields {
         if !members.iter().any(|m| m.name == n.name) {
             g.diags.error(
@@ -246,11 +187,7 @@ fn check_struct_init(g: &mut Gen, addr: u32, ty: &Type, init: Option<&Init>) {
         }
     }
     for m in &members {
-        let given = fields
-            .iter()
-            .find(|(n, _)| n.name == m.name)
-            .map(|(_, i)| i.clone());
-        let v = given.or_else(|| m.init.clone());
+        let v = member_init(&fields, m);
         check_init(g, addr + m.offset, &m.ty, v.as_ref(), None);
     }
 }
@@ -261,18 +198,8 @@ fn check_fb_init(g: &mut Gen, addr: u32, ty: &Type, init: Option<&Init>) {
     if g.prog.pous[*pi].recursive {
         return;
     }
-    let fields: Vec<(Ident, Init)> = match init {
-        Some(Init::Struct(f, _)) => f.clone(),
-        Some(other) => {
-            g.diags.error(
-                codes::INITIAL_VALUE_SHAPE,
-                other.span(),
-                "function block initial values must be written `(input := value, ...)`",
-            );
-            Vec::new()
-        }
-        None => Vec::new(),
-    };
+    let what = "function block initial values must be written `(input := value, ...)`";
+    let fields = init_fields(g, init, what);
     let vars = g.prog.pous[*pi].vars.clone();
     for (n, _) in &fields {
         if !vars.iter().any(|m| {
@@ -289,13 +216,52 @@ fn check_fb_init(g: &mut Gen, addr: u32, ty: &Type, init: Option<&Init>) {
         if matches!(v.kind, VarKind::External | VarKind::Global | VarKind::InOut) {
             continue;
         }
-        let given = fields
-            .iter()
-            .find(|(n, _)| n.name == v.name)
-            .map(|(_, i)| i.clone());
-        let iv = given.or_else(|| v.init.clone());
+        let iv = member_init(&fields, v);
         check_init(g, addr + v.offset, &v.ty, iv.as_ref(), Some(*pi));
     }
+}
+
+/// The `(name := value, ...)` of a structure's or a block instance's initial value `init`
+/// (reported, as `shape` says, when it is written otherwise).
+fn init_fields(g: &mut Gen, init: Option<&Init>, shape: &str) -> Vec<(Ident, Init)> {
+    match init {
+        Some(Init::Struct(f, _)) => f.clone(),
+        Some(other) => {
+            g.diags
+                .error(codes::INITIAL_VALUE_SHAPE, other.span(), shape);
+            Vec::new()
+        }
+        None => Vec::new(),
+    }
+}
+
+/// The initial value of member `m` (a structure's member or a block's variable) where
+/// `fields` give some: the one given, else its declaration's.
+pub(crate) fn member_init(fields: &[(Ident, Init)], m: &VarDef) -> Option<Init> {
+    let given = fields.iter().find(|(n, _)| n.name == m.name);
+    given.map(|(_, i)| i.clone()).or_else(|| m.init.clone())
+}
+
+/// The initial value of each element of an array of `count` elements initialised with
+/// `init` (`[v1, v2, n(v)]`, or one value of a one-element array; the values past the
+/// last element are left out, `None` where the element keeps its type's default).
+pub(crate) fn array_init_values(init: Option<&Init>, count: u64) -> Vec<Option<&Init>> {
+    let mut values = Vec::new();
+    match init {
+        Some(Init::Array(items, _)) => {
+            for it in items {
+                for _ in 0..it.repeat {
+                    if values.len() as u64 >= count {
+                        break;
+                    }
+                    values.push(it.value.as_ref());
+                }
+            }
+        }
+        Some(i @ Init::Expr(_)) if count == 1 => values.push(Some(i)),
+        _ => {}
+    }
+    values
 }
 
 /// The cell (little-endian bits, as the VM holds a value of `elem`) of the constant `v` as a

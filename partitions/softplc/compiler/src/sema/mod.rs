@@ -407,6 +407,13 @@ pub fn align_up(v: u32, a: u32) -> u32 {
 }
 
 impl Program {
+    /// Whether a variable of type `ty` at `addr` lies (partly) past the end of data memory,
+    /// or data memory overflowed (the data-size check reports it; its initial values are
+    /// neither checked nor written).
+    pub fn beyond_data(&self, addr: u32, ty: &Type) -> bool {
+        self.data_overflow || addr.saturating_add(self.size_align(ty).0) > MAX_DATA
+    }
+
     pub fn size_align(&self, ty: &Type) -> (u32, u32) {
         match ty {
             Type::Elem(e) | Type::Subrange(e, ..) => (e.size(), e.size()),

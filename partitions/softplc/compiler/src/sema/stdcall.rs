@@ -11,7 +11,7 @@
 //! both passes.
 
 use crate::ast::{Arg, Expr, ExprKind, Ident};
-use crate::codegen::{Gen, MAX_TEMP_STRING, StdArgs, TimeFunction, split_arguments};
+use crate::codegen::{Gen, MAX_TEMP_STRING, StdArgs, StdFamily, TimeFunction, split_arguments};
 use crate::codes;
 use crate::diagnostics::Span;
 use crate::sema::call::check_output_writable;
@@ -51,29 +51,18 @@ pub(crate) fn std_call(
     let Some(exprs) = std_arguments(g, name, id, args) else {
         return Some(Type::Error);
     };
-    let c = StdArgs {
-        name,
-        id,
-        exprs,
-        ctx: typed.map(Type::Elem).or(ctx),
-        span,
-        typed,
-    };
+    let c = StdArgs::new((name, typed), id, exprs, ctx, span);
     if let Some(t) = typed
         && !typed_arguments(g, &c, t)
     {
         return Some(Type::Error);
     }
-    match name {
-        "SQRT" | "LN" | "LOG" | "EXP" | "SIN" | "COS" | "TAN" | "ASIN" | "ACOS" | "ATAN"
-        | "EXPT" | "ABS" | "TRUNC" | "__NOW" | "ATAN2" | "TIME" | "LTIME" => std_numeric(g, &c),
-        _ if Gen::typed_trunc(name).is_some() => std_numeric(g, &c),
-        "MOVE" | "SEL" | "MAX" | "MIN" | "LIMIT" | "MUX" => std_selection(g, &c),
-        "SHL" | "SHR" | "ROL" | "ROR" => std_bits(g, &c),
-        "LEN" | "LEFT" | "RIGHT" | "MID" | "DELETE" | "INSERT" | "REPLACE" | "FIND" | "CONCAT" => {
-            std_string(g, &c)
-        }
-        _ => conversion(g, name, id, &c.exprs, span),
+    match StdFamily::of(name) {
+        StdFamily::Numeric => std_numeric(g, &c),
+        StdFamily::Selection => std_selection(g, &c),
+        StdFamily::Bits => std_bits(g, &c),
+        StdFamily::Strings => std_string(g, &c),
+        StdFamily::Conversion => conversion(g, name, id, &c.exprs, span),
     }
 }
 
@@ -447,14 +436,7 @@ fn std_time(
     let Some(exprs) = std_arguments(g, &id.name, id, args) else {
         return Type::Error;
     };
-    let c = StdArgs {
-        name: &id.name,
-        id,
-        exprs,
-        ctx: None,
-        span,
-        typed: None,
-    };
+    let c = StdArgs::new((&id.name, None), id, exprs, None, span);
     match f {
         TimeFunction::Operator(op, ta, tb) => {
             if !arity(g, &c, 2) || !time_operands_fit(g, &c, [ta, tb]) {
@@ -668,11 +650,7 @@ fn std_numeric(g: &mut Gen, c: &StdArgs) -> Option<Type> {
             if !arity(g, c, 0) {
                 return Some(Type::Error);
             }
-            if c.name == "LTIME" {
-                Type::Elem(Elem::LTime)
-            } else {
-                Type::TIME
-            }
+            Gen::clock_type(c.name)
         }
         _ => unreachable!("std_numeric called for {}", c.name),
     };
