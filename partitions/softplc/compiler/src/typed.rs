@@ -1,8 +1,9 @@
 //! The checked form of a program: what code generation consumes.
 //!
 //! Compilation checks first and emits second. [`sema`](crate::sema) checks the declarations
-//! and lays out the data ([`Program`]); [`check`] then checks every body — names, types,
-//! l-values, calls, references — reporting every diagnostic and recording what it learns
+//! and lays out the data ([`Program`]); [`check`] then checks the declared initial values
+//! (`sema::init`) and every body — statements, names, types, l-values,
+//! calls, references — reporting every diagnostic and recording what it learns
 //! ([`Checked`]): the type of each expression it infers ([`ExprTypes`]), what the callee of
 //! each call is ([`Callees`]), the variable each name denotes ([`Variables`]), the member
 //! each `base.m` denotes ([`Members`]), what each bare name denotes ([`BareNames`]: a
@@ -12,41 +13,33 @@
 //! generic standard function is called at ([`GenericTypes`]), how each conversion's
 //! argument reaches its source type ([`ConversionArguments`]), what each implicit
 //! conversion takes ([`Coercions`]), the property (receiver and accessors) each member read
-//! and assignment target reaches, if any ([`Properties`]), what each operator does by the
+//! and assignment target reaches, if any ([`Properties`]), the argument list of each
+//! property write ([`SetterArguments`]), the variable each `REF()`/`ADR()` and VAR_IN_OUT
+//! argument is part of ([`Roots`], for the object table), what each operator does by the
 //! rules of [`sema::ops`](crate::sema::ops) ([`Operations`]), the value of each CASE label
 //! ([`CaseLabels`]) and the calls between user POUs, on which
 //! [`sema::body`](crate::sema::body) judges the recursion rule. Only a program without
 //! diagnostics reaches [`emit`], which starts from those records and reports nothing
 //! itself: a diagnostic raised while emitting is a compiler bug (an internal error).
 //!
-//! The separation is not complete. Statements have a checker of their own
-//! ([`sema::stmt`](crate::sema::stmt): conditions, EXIT, CASE selectors and labels, FOR
-//! control variables and steps, the assignment and `REF=` rules, `__CATCH` variables), and
-//! the emitter's statement walk checks nothing. Expressions are still checked by the code
-//! generator's expression walk ([`crate::codegen::Gen`]), run once with emission and
-//! allocation switched off to check and once more to emit. The second walk takes every type
-//! it asks for from the table (it never infers: a missing record is an internal error),
-//! every callee from [`Callees`] (a user FUNCTION, a standard function, `REF`/`ADR`, an FB
-//! instance, a method or action: it never looks a called name up again), the variable of
-//! every name from [`Variables`] (the POU's own, its owner's, a global), the member of
-//! every `base.m` from [`Members`] (a structure's field, a block's variable), the meaning
-//! of every bare name from [`BareNames`] and the binding of every call's arguments to a
-//! user POU's or method's parameters from [`Bindings`], the order of standard-function
-//! arguments from [`StdArguments`] and the type of SEL, MAX, MIN, LIMIT, MUX, the REAL
-//! functions and the generic conversions from [`GenericTypes`], how a conversion takes its
-//! argument from [`ConversionArguments`] and every implicit conversion from [`Coercions`],
-//! the property of every access from [`Properties`], what every operator does from
-//! [`Operations`] (it only picks the opcodes); it still picks the operation of the other
-//! standard functions from their arguments' recorded types. No rule is evaluated twice:
-//! besides the statement checker's, the operator and standard-function type rules
-//! (`sema::ops`, `sema::stdfuncs`), the implicit conversion rules
-//! (`types::implicit_conversion` and those of references) and the recursion rule
-//! (`sema::body`), every rule of the expression walk (argument counts, placement and types,
-//! unconnected in-outs, in-out arguments and output targets, member access, literal and
-//! index ranges, partial accesses, the reference rules and escapes) runs in the checking
-//! pass only, behind `Gen::check_only` or in a `check_*` method only that pass calls. What
-//! is not separate yet is the walk itself: those checks live beside the emission code in
-//! `codegen/`, and the checking pass is the emitter's walk with emission switched off.
+//! The checking pass is a walk of its own, in `sema`, one checker a construct: statements
+//! (`sema::stmt`), expressions (literals, names, operators, implicit
+//! conversions: `sema::expr`), places
+//! (`sema::place`), calls (`sema::call`),
+//! methods and properties (`sema::class`), references
+//! (`sema::refs`), standard functions
+//! (`sema::stdcall`) and initial values. The code generator
+//! ([`crate::codegen`]) checks nothing and decides nothing a rule decides: it takes every
+//! type it asks for from the records (a missing one is an internal error), every callee,
+//! variable, member, bare name, binding, argument order, generic type, conversion,
+//! property and operation, and only picks the instructions. What both passes need to
+//! know the same way — where a place lies (`codegen::Place`), which standard
+//! functions there are and their inputs, a constant's cell — is written once and used by
+//! both. Both walk one context (`codegen::Gen`: the program, the POU walked, the
+//! records), the checker with `check_only` set, which it never emits nor allocates with.
+//! An expression the checker walks a second time only to infer its type (diagnostics off,
+//! `Gen::dry`) records only what no real walk has, as the type its context expects may
+//! differ.
 
 use std::collections::HashMap;
 

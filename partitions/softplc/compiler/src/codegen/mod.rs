@@ -1,8 +1,9 @@
-//! Code generation: the body walk that emits plc-vm bytecode through [`ImageBuilder`]. The
-//! checking pass ([`crate::typed::check`]) runs its expression walk with emission off
-//! (`check_only`), which is where the expressions' rules (types, names, l-values) are
-//! checked; a body's statements are checked by the statement checker
-//! (`sema::stmt`); emission reads the checker's records ([`crate::typed::Checked`]).
+//! Code generation: the body walk that emits plc-vm bytecode through [`ImageBuilder`], for
+//! a program the checking pass ([`crate::typed::check`], the checkers in [`crate::sema`])
+//! passed. It checks nothing: it reads the checker's records ([`crate::typed::Checked`]) and
+//! picks the instructions. `Gen` is the context both passes walk (the program, the POU
+//! walked, the records); the checker uses it with `check_only` set and never emits nor
+//! allocates with it.
 //!
 //! Every POU gets one POU-table entry with `arg_cells = ret_cells = 0`: parameters are passed
 //! through the callee's frame (FB instance or the function's static frame). Expression values
@@ -143,8 +144,9 @@ pub(crate) struct Gen<'a> {
     return_label: Option<Label>,
     /// When set, nothing is emitted and no diagnostics are reported (type inference).
     pub dry: bool,
-    /// When set, the bodies are checked (every diagnostic reported, every expression's type
-    /// recorded) but nothing is allocated or emitted: the checking pass.
+    /// Set for the checking pass, which walks with this context (every diagnostic reported,
+    /// every decision recorded) and allocates and emits nothing; [`Gen::infer`] then asks the
+    /// checker.
     pub check_only: bool,
     /// The type of each expression inferred so far; the emission pass starts with the
     /// checking pass's (see [`crate::typed`]).

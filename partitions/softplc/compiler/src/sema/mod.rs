@@ -1,9 +1,12 @@
 //! Semantic analysis of declarations: resolves TYPE declarations, lays out the variables of
 //! every POU (frames) and of the globals, evaluates constant expressions (array bounds,
 //! subrange limits, string lengths, CASE labels, task properties) and checks the
-//! CONFIGURATION. The statements of the bodies are checked by [`stmt`], their expressions by
-//! the checking walk of [`crate::typed`]; [`body`] judges what that walk records (the call
-//! graph: the recursion rule).
+//! CONFIGURATION. The checking pass of the bodies ([`crate::typed::check`]) is here too, one
+//! checker a construct: the initial values (`init`), statements (`stmt`), expressions
+//! (`expr`: literals, names, operators, implicit conversions), places (`place`), calls
+//! (`call`), methods and properties (`class`), references (`refs`) and standard
+//! functions (`stdcall`), by the rules of [`ops`] and [`stdfuncs`]; [`body`] judges what
+//! they record (the call graph: the recursion rule).
 //!
 //! Memory model: every variable has a static home. Globals and program instances live at
 //! fixed addresses; an FB instance is a region inside its owner; a FUNCTION has one static

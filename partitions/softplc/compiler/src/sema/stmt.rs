@@ -9,11 +9,11 @@
 //! STRING, an aggregate to one of its own type, never a function block instance) and no
 //! reference to temporary storage escapes into it; a `REF=` target is a `REFERENCE TO`
 //! variable; a `__CATCH` variable is an `__EXCEPTION`. Expressions are checked (and their
-//! types, callees and names recorded, see [`crate::typed`]) by the code generator's
-//! expression walk with emission switched off, which this walk calls for each expression in
-//! the order the statement evaluates them, so the diagnostics come in source order as the
-//! emitter meets the expressions. The emitter's statement walk ([`crate::codegen`]) checks
-//! nothing: it runs only on a body this walk passed.
+//! types, callees and names recorded, see [`crate::typed`]) by the expression checker
+//! ([`crate::sema::expr`] and the checkers it calls), which this walk calls for each
+//! expression in the order the statement evaluates them, so the diagnostics come in source
+//! order as the emitter meets the expressions. The emitter's statement walk
+//! ([`crate::codegen`]) checks nothing: it runs only on a body this walk passed.
 
 use plc_vm::isa::Trap;
 
