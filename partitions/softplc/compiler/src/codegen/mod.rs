@@ -126,6 +126,10 @@ struct LoopCtx {
     try_depth: usize,
 }
 
+/// The context of a walk of the bodies: the program, the POU walked, what the checking pass
+/// records and the code generator reads, and the code generator's image. The checking pass
+/// (`sema`) walks with it too, `check_only` set: it reports and records, and never touches
+/// the image.
 pub(crate) struct Gen<'a> {
     pub prog: &'a mut Program,
     pub unit: &'a Unit,
