@@ -258,19 +258,6 @@ pub fn start(boot_info: u64, heap: &'static BootHeap) -> ! {
 }
 
 fn log_memory_summary(regions: &[MemoryRegion]) {
-    let kinds = [
-        MemoryKind::USABLE,
-        MemoryKind::LOADER,
-        MemoryKind::KERNEL,
-        MemoryKind::PAGE_TABLES,
-        MemoryKind::SYSTEM_IMAGE,
-        MemoryKind::BOOT_INFO,
-        MemoryKind::ACPI_RECLAIMABLE,
-        MemoryKind::ACPI_NVS,
-        MemoryKind::FIRMWARE_RUNTIME,
-        MemoryKind::MMIO,
-        MemoryKind::RESERVED,
-    ];
     // Firmware "reserved" ranges include address space that is not RAM (e.g. PCIe ECAM).
     let ram: u64 = regions
         .iter()
@@ -282,7 +269,7 @@ fn log_memory_summary(regions: &[MemoryRegion]) {
         regions.len(),
         (ram * PAGE_SIZE) >> 20
     );
-    for kind in kinds {
+    for kind in MemoryKind::ALL {
         let pages: u64 = regions
             .iter()
             .filter(|r| r.kind == kind)

@@ -29,12 +29,24 @@ fn smp_boot() {
         o.line("smp: 4 of 4 CPUs online").is_some(),
         "the boot CPU did not count 4 CPUs online",
     );
+    // Each AP's own local APIC timer beats 100 times a second (virtual time): a second of
+    // beats logged, none more than a few periods after the one before.
+    for cpu in 1..4 {
+        let line = o.line(&format!("cpu {cpu}: heartbeat 100 "));
+        eprintln!("smp_boot cpu {cpu}: {line:?}");
+        check(
+            &o,
+            line.and_then(|l| field(l, "longest_gap_us="))
+                .is_some_and(|gap| (9_000..=50_000).contains(&gap)),
+            &format!("cpu {cpu} did not log a second of heartbeats 10 ms apart (at most 50 ms)"),
+        );
+    }
     check(
         &o,
         o.succeeded(),
         "expected success exit (33): the victim ends the run",
     );
-    // The same bound as attack_map on one CPU (tests/tests/attack.rs): the halted CPUs
+    // The same bound as attack_map on one CPU (tests/tests/attack.rs): the waiting CPUs
     // change nothing for the boot CPU's windows.
     let summary = o
         .lines

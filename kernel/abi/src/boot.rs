@@ -71,6 +71,21 @@ impl MemoryKind {
     /// UEFI runtime services code/data; must stay untouched.
     pub const FIRMWARE_RUNTIME: Self = Self(11);
 
+    /// Every kind, in the order the kernel's memory summary lists them.
+    pub const ALL: [Self; 11] = [
+        Self::USABLE,
+        Self::LOADER,
+        Self::KERNEL,
+        Self::PAGE_TABLES,
+        Self::SYSTEM_IMAGE,
+        Self::BOOT_INFO,
+        Self::ACPI_RECLAIMABLE,
+        Self::ACPI_NVS,
+        Self::FIRMWARE_RUNTIME,
+        Self::MMIO,
+        Self::RESERVED,
+    ];
+
     /// Short name for logs.
     pub const fn name(self) -> &'static str {
         match self {

@@ -16,6 +16,8 @@ use x86_64::structures::DescriptorTablePointer;
 
 /// Vector of the local APIC timer.
 pub const TIMER_VECTOR: u8 = 0x30;
+/// Vector of an application processor's local APIC timer (its heartbeat, `arch::smp`).
+pub const HEARTBEAT_VECTOR: u8 = 0x31;
 /// Vector the local APIC uses for spurious interrupts (must end in 0xf on old CPUs).
 pub const SPURIOUS_VECTOR: u8 = 0xff;
 
@@ -161,6 +163,7 @@ stub!(vec30, 30, error_code);
 stub!(vec31, 31);
 stub!(legacy_pic, super::pic::VECTOR_BASE);
 stub!(timer, TIMER_VECTOR);
+stub!(heartbeat, HEARTBEAT_VECTOR);
 
 /// Entry stubs of the user interrupt lines (vector LINE_VECTOR_BASE + n).
 macro_rules! line_stubs {
@@ -258,6 +261,7 @@ static IDT: Lazy<Idt> = Lazy::new(|| {
         idt.0[(super::pic::VECTOR_BASE + v) as usize] = Gate::interrupt(legacy_pic, 0);
     }
     idt.0[TIMER_VECTOR as usize] = Gate::interrupt(timer, 0);
+    idt.0[HEARTBEAT_VECTOR as usize] = Gate::interrupt(heartbeat, 0);
     for (line, stub) in LINE_STUBS.into_iter().enumerate() {
         idt.0[LINE_VECTOR_BASE as usize + line] = Gate::interrupt(stub, 0);
     }
@@ -296,6 +300,8 @@ extern "sysv64" fn dispatch(frame: &mut TrapFrame) {
             super::lapic::end_of_interrupt();
             super::entry::on_line_interrupt(line, from_user);
         }
+        // The AP's loop after its `hlt` counts the beat (`arch::smp`).
+        v if v == HEARTBEAT_VECTOR as u64 => super::lapic::end_of_interrupt(),
         // Masked legacy PIC: only spurious IRQ 7/15 can arrive; they need no EOI.
         v if v == super::pic::VECTOR_BASE as u64 => {}
         v if v == SPURIOUS_VECTOR as u64 => {}

@@ -1,10 +1,11 @@
 //! Application-processor (AP) bring-up: each CPU the MADT lists besides the boot CPU is
 //! started with INIT-SIPI-SIPI through a trampoline in a low page (real mode -> protected
 //! mode -> long mode), gets its own GDT, TSS, IST stacks and kernel stack from frames
-//! reserved at boot, takes on the boot CPU's control registers and page tables, and waits
-//! halted with interrupts masked. Nothing is scheduled on it yet (docs/status.md).
+//! reserved at boot, takes on the boot CPU's control registers and page tables, and, while it
+//! waits, beats its own local APIC timer ([`heartbeat`]). Nothing is scheduled on it yet
+//! (docs/status.md).
 
-use super::{cpu, gdt, idt, lapic};
+use super::{gdt, idt, lapic};
 use crate::acpi::AcpiInfo;
 use crate::boot::{DirectMapLinks, FRAMES};
 use crate::kprintln;
@@ -194,7 +195,7 @@ pub fn start_application_processors(
     }
     let online = ONLINE.load(Ordering::Acquire);
     kprintln!(
-        "smp: {online} of {} CPUs online; the application processors wait halted (nothing is scheduled on them yet)",
+        "smp: {online} of {} CPUs online; the application processors beat their own timers (nothing is scheduled on them yet)",
         aps().count() + 1
     );
     online
@@ -277,7 +278,30 @@ extern "sysv64" fn ap_entry(block: *mut CpuBlock) -> ! {
     let (apic, _) = lapic::init(lapic_phys);
     kprintln!("cpu {number} online (apic {apic})");
     ONLINE.fetch_add(1, Ordering::Release);
-    cpu::halt_forever()
+    heartbeat(number)
+}
+
+/// Beats a second of an AP's local APIC timer while it waits.
+const HEARTBEAT_HZ: u64 = 100;
+
+/// An AP's wait: its own local APIC timer beats [`HEARTBEAT_HZ`] times a second (periodic,
+/// vector [`idt::HEARTBEAT_VECTOR`]) and each second the AP logs `cpu <n>: heartbeat <beats>
+/// longest_gap_us=<us>`: the proof that each core takes its own timer's interrupts on time.
+/// The AP touches no kernel object, so it never takes the kernel's lock.
+fn heartbeat(number: u64) -> ! {
+    let ticks = lapic::timer_hz() / HEARTBEAT_HZ;
+    lapic::start_periodic(idt::HEARTBEAT_VECTOR, ticks as u32);
+    let (mut beats, mut last, mut longest) = (0u64, crate::time::since_boot_ns(), 0);
+    loop {
+        x86_64::instructions::interrupts::enable_and_hlt();
+        x86_64::instructions::interrupts::disable();
+        let now = crate::time::since_boot_ns();
+        (beats, longest, last) = (beats + 1, longest.max(now - last), now);
+        if beats.is_multiple_of(HEARTBEAT_HZ) {
+            let gap_us = core::mem::take(&mut longest) / 1000;
+            kprintln!("cpu {number}: heartbeat {beats} longest_gap_us={gap_us}");
+        }
+    }
 }
 
 #[cfg(test)]
