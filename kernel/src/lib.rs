@@ -46,5 +46,8 @@ pub mod timepart;
 #[path = "../host-tests/objects.rs"]
 mod tests;
 
+// Test hooks, which only scenario images contain (feature `test-hooks`); outside `src` for
+// the same reason as the host tests: the budget counts what the shipped kernel runs.
 #[cfg(feature = "test-hooks")]
+#[path = "../test-hooks.rs"]
 pub mod test_hooks;
