@@ -222,7 +222,7 @@ pub fn start(boot_info: u64, heap: &'static BootHeap) -> ! {
         panic!("system.img has no 'syssw' entry (the root task)")
     };
     crate::arch::cpu::enable_sse_for_user();
-    crate::arch::syscall::init();
+    crate::arch::syscall::init(0, crate::arch::stack::top());
     crate::arch::smp::start_application_processors(&acpi, apic_id, regions);
     {
         let mut k = crate::arch::entry::KERNEL.lock();

@@ -1,11 +1,13 @@
 //! Kernel entry and exit for user threads.
 //!
 //! Every entry from ring 3 (`syscall`, interrupt, exception) leaves the same [`TrapFrame`]
-//! in the same place: the running thread's own saved context, which [`ACTIVE_FRAME`]
-//! points to (and the TSS's ring-0 stack pointer just past it, so the CPU pushes an
-//! interrupt's part of the frame there too). The stubs then switch to the one kernel stack
-//! for the portable code, which decides, and return through the frame `ACTIVE_FRAME` then
-//! points to: switching threads copies no registers. A `syscall` entry returns with
+//! in the same place: the running thread's own saved context, which the CPU's
+//! [`CpuEntry::active_frame`] points to (and the TSS's ring-0 stack pointer just past it,
+//! so the CPU pushes an interrupt's part of the frame there too). The stubs then switch to
+//! the CPU's kernel stack for the portable code, which decides, and return through the
+//! frame `active_frame` then points to: switching threads copies no registers. The stubs
+//! find their CPU's [`CpuEntry`] through GS: in kernel mode GS's base is that block, in
+//! user mode the running thread's (`swapgs` on every entry from and exit to ring 3). A `syscall` entry returns with
 //! `sysret` when the frame allows it (`rcx` = `rip`, `r11` = `rflags`, as for any thread
 //! that entered by `syscall`), else with `iretq`, which restores every register.
 //!
@@ -14,7 +16,6 @@
 //! returns to the halt loop, which looks again.
 
 use super::idt::TrapFrame;
-use super::stack::{KERNEL_STACK, KERNEL_STACK_SIZE};
 use crate::state::Kernel;
 use crate::syscall::Outcome;
 use crate::table::{TaskIdx, ThreadIdx};
@@ -32,30 +33,72 @@ pub const FRAME_SIZE: usize = core::mem::size_of::<TrapFrame>();
 /// Set once user mode runs; before that, timer interrupts only count (boot calibration).
 static RUNNING: AtomicBool = AtomicBool::new(false);
 
-static mut USER_RSP: u64 = 0;
+/// What one CPU's entry stubs keep and find through GS (its kernel-mode base).
+#[repr(C)]
+pub(super) struct CpuEntry {
+    /// This block's address (what `gs:[0]` gives the portable code).
+    this: u64,
+    /// A `syscall`'s user stack pointer, until the frame holds it.
+    user_rsp: u64,
+    /// The running thread's saved context: where the stubs save a user frame and what
+    /// they return through. Written only by [`activate_frame`] (interrupts off).
+    pub(super) active_frame: u64,
+    /// The top of this CPU's kernel stack.
+    pub(super) stack_top: u64,
+}
 
-/// Address of the running thread's saved context: where the entry stubs save a user
-/// frame and what they return through. Written only by [`switch_to`] (interrupts off).
-pub(super) static mut ACTIVE_FRAME: u64 = 0;
+static mut CPU_ENTRIES: [CpuEntry; crate::acpi::MAX_CPUS] = [const {
+    CpuEntry {
+        this: 0,
+        user_rsp: 0,
+        active_frame: 0,
+        stack_top: 0,
+    }
+}; crate::acpi::MAX_CPUS];
+
+const IA32_GS_BASE: u32 = 0xc000_0101;
+
+/// Makes entry block `cpu` this CPU's (its GS base), with its kernel stack's top.
+pub(super) fn init_cpu(cpu: usize, stack_top: u64) {
+    // SAFETY: only the address of the block is taken.
+    let block = unsafe { &raw mut CPU_ENTRIES[cpu] };
+    // SAFETY: each CPU initialises its own block, once, before its first user entry; no
+    // other reference to it exists.
+    let block = unsafe { &mut *block };
+    (block.this, block.stack_top) = (block as *mut CpuEntry as u64, stack_top);
+    // SAFETY: the kernel uses GS for nothing but this block.
+    unsafe { x86_64::registers::model_specific::Msr::new(IA32_GS_BASE).write(block.this) };
+}
 
 /// Makes `context` (a thread's, in the kernel's thread table, which never moves) the frame
-/// the next user entry saves into and the next exit restores.
+/// the next user entry on this CPU saves into and the next exit restores.
 fn activate_frame(context: *mut TrapFrame) {
     let at = context as u64;
-    // SAFETY: only the entry stubs read it, with interrupts off, on this CPU.
-    unsafe { ACTIVE_FRAME = at };
+    // SAFETY: in kernel mode GS's base is this CPU's block (`init_cpu`), whose first word
+    // is its address; only this CPU, with interrupts off, and its stubs use the block.
+    unsafe {
+        core::arch::asm!(
+            "mov {block}, gs:[0]",
+            "mov [{block} + {active}], {at}",
+            block = out(reg) _,
+            active = const core::mem::offset_of!(CpuEntry, active_frame),
+            at = in(reg) at,
+            options(nostack, preserves_flags),
+        );
+    }
     super::gdt::set_user_entry_stack(at + FRAME_SIZE as u64);
 }
 
 #[unsafe(naked)]
 pub(super) unsafe extern "sysv64" fn syscall_entry() {
     naked_asm!(
-        "mov [rip + {user_rsp}], rsp",
-        "mov rsp, [rip + {active}]",
+        "swapgs",
+        "mov gs:[{user_rsp}], rsp",
+        "mov rsp, gs:[{active}]",
         "add rsp, {frame}",
         // The same layout an interrupt from ring 3 leaves (see TrapFrame).
         "push {user_ss}",
-        "push qword ptr [rip + {user_rsp}]",
+        "push qword ptr gs:[{user_rsp}]",
         "push r11",
         "push {user_cs}",
         "push rcx",
@@ -64,9 +107,9 @@ pub(super) unsafe extern "sysv64" fn syscall_entry() {
         "push rax", "push rbx", "push rcx", "push rdx", "push rsi", "push rdi", "push rbp",
         "push r8", "push r9", "push r10", "push r11", "push r12", "push r13", "push r14", "push r15",
         "cld",
-        "lea rsp, [rip + {stack} + {size}]",
+        "mov rsp, gs:[{stack}]",
         "call {handler}",
-        "mov rsp, [rip + {active}]",
+        "mov rsp, gs:[{active}]",
         "pop r15", "pop r14", "pop r13", "pop r12", "pop r11", "pop r10", "pop r9", "pop r8",
         "pop rbp", "pop rdi", "pop rsi", "pop rdx", "pop rcx", "pop rbx", "pop rax",
         "add rsp, 16",
@@ -76,14 +119,15 @@ pub(super) unsafe extern "sysv64" fn syscall_entry() {
         "cmp r11, [rsp + 16]",
         "jne 2f",
         "mov rsp, [rsp + 24]",
+        "swapgs",
         "sysretq",
         "2:",
+        "swapgs",
         "iretq",
-        user_rsp = sym USER_RSP,
-        active = sym ACTIVE_FRAME,
+        user_rsp = const core::mem::offset_of!(CpuEntry, user_rsp),
+        active = const core::mem::offset_of!(CpuEntry, active_frame),
         frame = const FRAME_SIZE,
-        stack = sym KERNEL_STACK,
-        size = const KERNEL_STACK_SIZE,
+        stack = const core::mem::offset_of!(CpuEntry, stack_top),
         user_ss = const crate::state::USER_SS,
         user_cs = const crate::state::USER_CS,
         vector = const abi::ipc::VECTOR_SYSCALL,
@@ -254,7 +298,7 @@ pub fn enter_user_mode() -> ! {
 #[unsafe(naked)]
 unsafe extern "sysv64" fn restore_frame() -> ! {
     naked_asm!(
-        "mov rsp, [rip + {active}]",
+        "mov rsp, gs:[{active}]",
         "pop r15",
         "pop r14",
         "pop r13",
@@ -271,7 +315,8 @@ unsafe extern "sysv64" fn restore_frame() -> ! {
         "pop rbx",
         "pop rax",
         "add rsp, 16",
+        "swapgs",
         "iretq",
-        active = sym ACTIVE_FRAME,
+        active = const core::mem::offset_of!(CpuEntry, active_frame),
     )
 }

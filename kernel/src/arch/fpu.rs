@@ -6,7 +6,9 @@ use core::arch::asm;
 use x86_64::registers::model_specific::Msr;
 
 const IA32_FS_BASE: u32 = 0xc000_0100;
-const IA32_GS_BASE: u32 = 0xc000_0101;
+/// The thread's GS base while the kernel runs (`swapgs` makes it GS's on the way to ring 3;
+/// the kernel's own is its CPU's entry block, `entry::init_cpu`).
+const IA32_KERNEL_GS_BASE: u32 = 0xc000_0102;
 
 pub fn save(area: &mut FpuState) {
     // SAFETY: FXSAVE writes 512 bytes to a 16-byte-aligned area, which FpuState is.
@@ -22,8 +24,8 @@ pub fn restore(area: &FpuState) {
 /// Loads a thread's FS and GS bases (canonical user addresses, checked by the callers).
 pub fn set_bases(fs: u64, gs: u64) {
     // SAFETY: writing the base MSR only changes what user-mode FS accesses address; the
-    // kernel uses neither segment.
+    // kernel does not use FS.
     unsafe { Msr::new(IA32_FS_BASE).write(fs) };
-    // SAFETY: likewise for GS.
-    unsafe { Msr::new(IA32_GS_BASE).write(gs) };
+    // SAFETY: likewise for GS in user mode; the kernel's GS base is not this MSR.
+    unsafe { Msr::new(IA32_KERNEL_GS_BASE).write(gs) };
 }

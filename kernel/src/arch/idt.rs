@@ -92,13 +92,14 @@ unsafe extern "sysv64" fn common_entry() {
         "mov rdi, rsp",
         "cld",
         // From ring 3 the frame is the running thread's context (entry.rs): the code runs
-        // on the kernel stack and returns through the thread then active. From ring 0
-        // (the halt loop) or an IST stack it stays where it is.
-        "cmp rsp, [rip + {active}]",
-        "jne 2f",
-        "lea rsp, [rip + {stack} + {size}]",
+        // on the CPU's kernel stack and returns through the thread then active, GS swapped
+        // on the way in and out. From ring 0 (the halt loop) it stays where it is.
+        "test qword ptr [rsp + {cs}], 3",
+        "jz 2f",
+        "swapgs",
+        "mov rsp, gs:[{stack}]",
         "call {dispatch}",
-        "mov rsp, [rip + {active}]",
+        "mov rsp, gs:[{active}]",
         "jmp 3f",
         "2:",
         "call {dispatch}",
@@ -106,11 +107,16 @@ unsafe extern "sysv64" fn common_entry() {
         "pop r15", "pop r14", "pop r13", "pop r12", "pop r11", "pop r10", "pop r9", "pop r8",
         "pop rbp", "pop rdi", "pop rsi", "pop rdx", "pop rcx", "pop rbx", "pop rax",
         "add rsp, 16",
+        // Back to ring 3 (the CS of the frame returned through): GS as the thread had it.
+        "test qword ptr [rsp + 8], 3",
+        "jz 4f",
+        "swapgs",
+        "4:",
         "iretq",
         dispatch = sym dispatch,
-        active = sym super::entry::ACTIVE_FRAME,
-        stack = sym super::stack::KERNEL_STACK,
-        size = const super::stack::KERNEL_STACK_SIZE,
+        cs = const core::mem::offset_of!(TrapFrame, cs),
+        active = const core::mem::offset_of!(super::entry::CpuEntry, active_frame),
+        stack = const core::mem::offset_of!(super::entry::CpuEntry, stack_top),
     )
 }
 

@@ -274,7 +274,7 @@ extern "sysv64" fn ap_entry(block: *mut CpuBlock) -> ! {
         );
     }
     idt::init();
-    super::syscall::init();
+    super::syscall::init(number as usize, stack_top);
     let (apic, _) = lapic::init(lapic_phys);
     kprintln!("cpu {number} online (apic {apic})");
     ONLINE.fetch_add(1, Ordering::Release);
