@@ -1,9 +1,7 @@
 //! The boot sequence, from the loader's hand-off to "ready". Each step logs what it found so
 //! the serial log doubles as a hardware report.
 
-use crate::acpi::{self, PhysMemory};
 use crate::arch::{cpu, gdt, hpet::Hpet, idt, ioapic::IoApic, lapic, pic, pit};
-use crate::heap::BootHeap;
 use crate::mem::frames::{FrameAllocator, FrameLinks};
 use crate::mem::{PAGE_SIZE, phys_to_virt};
 use crate::table::RpIdx;
@@ -33,22 +31,6 @@ impl FrameLinks for DirectMapLinks {
     }
 }
 
-/// Physical memory seen through the direct map, limited to what the loader mapped.
-struct DirectMap {
-    size: u64,
-}
-
-impl PhysMemory for DirectMap {
-    fn bytes(&self, phys: u64, len: usize) -> Option<&[u8]> {
-        if phys.checked_add(len as u64)? > self.size {
-            return None;
-        }
-        // SAFETY: the range lies inside the direct map (checked above), which maps all of it
-        // read/write for the kernel's lifetime; ACPI tables are not written concurrently.
-        Some(unsafe { core::slice::from_raw_parts(phys_to_virt(phys) as *const u8, len) })
-    }
-}
-
 /// The loader's identity-mapped trampoline is the only lower-half mapping; dropping the whole
 /// lower half of the PML4 leaves user space an empty half.
 fn drop_lower_half() {
@@ -62,7 +44,7 @@ fn drop_lower_half() {
     x86_64::instructions::tlb::flush_all();
 }
 
-pub fn start(boot_info: u64, heap: &'static BootHeap) -> ! {
+pub fn start(boot_info: u64) -> ! {
     let entry_tsc = cpu::rdtsc();
     drop_lower_half();
     time::set_boot_tsc(entry_tsc);
@@ -88,7 +70,6 @@ pub fn start(boot_info: u64, heap: &'static BootHeap) -> ! {
     gdt::init();
     idt::init();
     kprintln!("cpu: GDT, TSS (IST for #DF, NMI, #MC) and IDT loaded");
-    heap.init();
 
     // SAFETY: the loader placed `memory_region_count` regions at `memory_regions` (physical),
     // inside BOOT_INFO memory that stays reserved and unmodified.
@@ -129,28 +110,30 @@ pub fn start(boot_info: u64, heap: &'static BootHeap) -> ! {
     FRAMES.call_once(|| Mutex::new(frames));
 
     pic::remap_and_mask();
-    let direct_map = DirectMap {
-        size: info.direct_map_size,
-    };
-    let acpi = acpi::parse(info.rsdp, &direct_map).unwrap_or_else(|e| panic!("ACPI: {e}"));
+    let machine = &info.machine;
     kprintln!(
-        "acpi: revision {}, {} CPU(s), {} IOAPIC(s), {} ISA override(s), HPET {}",
-        acpi.revision,
-        acpi.cpu_apic_ids.len(),
-        acpi.io_apics.len(),
-        acpi.overrides.len(),
-        if acpi.hpet_address.is_some() {
+        "acpi: revision {}, {} CPU(s), {} IOAPIC(s), {} ISA override(s), HPET {}{}",
+        machine.acpi_revision,
+        machine.cpu_apic_ids().len(),
+        machine.io_apics().len(),
+        machine.overrides().len(),
+        if machine.hpet_address != 0 {
             "present"
         } else {
             "absent"
+        },
+        if machine.entries_ignored > 0 {
+            "; IOAPIC or override entries beyond the loader's lists ignored"
+        } else {
+            ""
         }
     );
-    let (apic_id, apic_version) = lapic::init(acpi.local_apic_address);
+    let (apic_id, apic_version) = lapic::init(machine.local_apic_address);
     kprintln!(
         "apic: local APIC id {apic_id} version {apic_version:#x} at {:#x}; legacy PIC masked",
-        acpi.local_apic_address
+        machine.local_apic_address
     );
-    for io in &acpi.io_apics {
+    for io in machine.io_apics() {
         // SAFETY: the address comes from the MADT's IOAPIC entry.
         let ioapic = unsafe { IoApic::new(io.address) };
         ioapic.mask_all();
@@ -162,11 +145,11 @@ pub fn start(boot_info: u64, heap: &'static BootHeap) -> ! {
             io.gsi_base + ioapic.line_count() - 1
         );
         if io.gsi_base == 0 {
-            crate::arch::ioapic::install(ioapic, apic_id, &acpi.overrides);
+            crate::arch::ioapic::install(ioapic, apic_id, machine.overrides());
         }
     }
 
-    let apic_timer_hz = calibrate(acpi.hpet_address);
+    let apic_timer_hz = calibrate((machine.hpet_address != 0).then_some(machine.hpet_address));
     prove_timer(apic_timer_hz);
     if lapic::has_tsc_deadline() {
         lapic::use_tsc_deadline();
@@ -189,8 +172,7 @@ pub fn start(boot_info: u64, heap: &'static BootHeap) -> ! {
         kprintln!("sysimg:   {:<24} {:>8} bytes", entry.name, entry.data.len());
     }
 
-    let dma = acpi.dma_remapping.as_ref().and_then(|found| {
-        let base = found.base;
+    let dma = (machine.dma_base != 0).then_some(machine.dma_base).and_then(|base| {
         // SAFETY: the address comes from the ACPI DMAR table's one remapping unit.
         let unit = unsafe { crate::arch::vtd::Vtd::new(base) }?;
         let tables = crate::mem::iommu::DmaTables::new(unit.levels, unit.domains)?;
@@ -199,18 +181,18 @@ pub fn start(boot_info: u64, heap: &'static BootHeap) -> ! {
             return None;
         }
         let mut endpoints = [None; crate::state::DMA_ENDPOINTS];
-        for (slot, &id) in endpoints.iter_mut().zip(&found.endpoints) {
+        for (slot, &id) in endpoints.iter_mut().zip(machine.dma_endpoints()) {
             *slot = Some(id);
         }
         kprintln!(
             "iommu: DMA remapping on (VT-d at {base:#x}, {}-level tables, bus address = physical, {}): a device reaches only the DMA region syssw confines it to",
             unit.levels,
-            if found.all { "every PCI function" } else { "the functions the DMAR lists" }
+            if machine.dma_all != 0 { "every PCI function" } else { "the functions the DMAR lists" }
         );
         Some(crate::state::Dma {
             unit,
             tables,
-            all: found.all,
+            all: machine.dma_all != 0,
             endpoints,
         })
     });
@@ -223,7 +205,7 @@ pub fn start(boot_info: u64, heap: &'static BootHeap) -> ! {
     };
     crate::arch::cpu::enable_sse_for_user();
     crate::arch::syscall::init(0, crate::arch::stack::top());
-    crate::arch::smp::start_application_processors(&acpi, apic_id, regions);
+    crate::arch::smp::start_application_processors(machine, apic_id, regions);
     {
         let mut k = crate::arch::entry::KERNEL.lock();
         k.dma = dma;
@@ -243,12 +225,6 @@ pub fn start(boot_info: u64, heap: &'static BootHeap) -> ! {
         );
     }
 
-    kprintln!(
-        "heap: {} bytes of {} KiB used at boot; sealed",
-        heap.used(),
-        crate::heap::BOOT_HEAP_SIZE / 1024
-    );
-    heap.seal();
     kprintln!("kernel: ready");
 
     #[cfg(feature = "test-hooks")]

@@ -5,24 +5,21 @@
 //! partitions, address spaces, synchronous IPC, notifications, exceptions as messages, time
 //! partitions, interrupt lines and I/O-port grants (`docs/architecture.md` maps each to its
 //! file). What it must never do: hold policy (that belongs to the system software), allocate
-//! from a heap after boot ([`heap::BootHeap`] refuses), panic on anything user space or a
-//! validated configuration hands it, or loop without bound over user input.
+//! from a heap (it has none: the loader parses the firmware's tables into the fixed-size
+//! `abi::machine::Machine`), panic on anything user space or a validated configuration
+//! hands it, or loop without bound over user input.
 //!
 //! Hardware glue lives in [`arch`]; the pure logic (object operations through the syscall
-//! dispatcher, scheduling, time partitions, [`mem::frames`], [`acpi`] parsing, log
-//! formatting) is host-testable with `cargo test -p kernel --lib`. `unsafe` is allowed only
-//! where hardware or raw memory demands it: [`arch`], [`mem`], [`boot`], [`heap`] and the
-//! functions marked with their own `allow`.
+//! dispatcher, scheduling, time partitions, [`mem::frames`], log formatting) is host-testable with `cargo test -p kernel --lib`. `unsafe` is allowed only
+//! where hardware or raw memory demands it: [`arch`], [`mem`], [`boot`] and the functions
+//! marked with their own `allow`.
 #![cfg_attr(not(test), no_std)]
 
-pub mod acpi;
 #[allow(unsafe_code)] // descriptor tables, port and register access, entry stubs
 pub mod arch;
-#[allow(unsafe_code)] // bring-up: boot information, ACPI tables and the image in physical memory
+#[allow(unsafe_code)] // bring-up: boot information and the image in physical memory
 pub mod boot;
 pub mod fault;
-#[allow(unsafe_code)] // the boot-time global allocator
-pub mod heap;
 pub mod io;
 pub mod ipc;
 pub mod irq;

@@ -1,13 +1,10 @@
-//! The kernel binary: the entry point the loader jumps to, the panic handler and the boot
-//! heap. Everything else lives in the library (`kernel::*`) so pure logic is host-testable.
+//! The kernel binary: the entry point the loader jumps to and the panic handler. Everything
+//! else lives in the library (`kernel::*`) so pure logic is host-testable.
 #![no_std]
 #![no_main]
 
 use kernel::arch::stack::{KERNEL_STACK, KERNEL_STACK_SIZE};
-use kernel::{boot, heap, kprintln, log, qemu};
-
-#[global_allocator]
-static HEAP: heap::BootHeap = heap::BootHeap::new();
+use kernel::{boot, kprintln, log, qemu};
 
 /// Entry from the loader: `rdi` = virtual address of the `BootInfo`, interrupts off, the
 /// loader's stack unmapped. Sets up our stack before touching memory, then never returns.
@@ -30,7 +27,7 @@ pub unsafe extern "sysv64" fn _start(boot_info: u64) -> ! {
 }
 
 extern "sysv64" fn kernel_entry(boot_info: u64) -> ! {
-    boot::start(boot_info, &HEAP)
+    boot::start(boot_info)
 }
 
 #[panic_handler]

@@ -94,7 +94,7 @@ pub struct Kernel {
 }
 
 /// Functions a remapping unit's device scopes may name (more count as not covered).
-pub const DMA_ENDPOINTS: usize = 32;
+pub const DMA_ENDPOINTS: usize = abi::machine::MAX_DMA_ENDPOINTS;
 
 /// The DMA remapping unit and its tables.
 pub struct Dma {

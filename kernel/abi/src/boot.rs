@@ -25,7 +25,7 @@ pub const KERNEL_BASE: u64 = 0xffff_ffff_8000_0000;
 pub const BOOT_INFO_MAGIC: u64 = u64::from_le_bytes(*b"PKBOOTIN");
 
 /// Bumped on every incompatible change of [`BootInfo`] or [`MemoryRegion`].
-pub const BOOT_INFO_VERSION: u32 = 2;
+pub const BOOT_INFO_VERSION: u32 = 3;
 
 /// A physical address range, `[start, start + len)`.
 #[repr(C)]
@@ -149,8 +149,6 @@ pub struct BootInfo {
     pub direct_map_base: u64,
     /// Bytes of physical address space covered by the direct map.
     pub direct_map_size: u64,
-    /// Physical address of the ACPI RSDP (revision 2 preferred), 0 if the firmware has none.
-    pub rsdp: u64,
     /// Where `system.img` was loaded (page-aligned, marked [`MemoryKind::SYSTEM_IMAGE`]).
     pub system_image: PhysRange,
     /// Physical page(s) of the loader trampoline, identity-mapped; the kernel unmaps them.
@@ -163,6 +161,9 @@ pub struct BootInfo {
     /// nanoseconds since the Unix epoch (UTC; a clock without a time zone is taken as UTC);
     /// 0 when the firmware has no clock.
     pub wall_clock_at_handoff: u64,
+    /// The CPUs, interrupt controllers, HPET and DMA remapping unit the firmware's ACPI
+    /// tables list (the loader parsed them).
+    pub machine: crate::machine::Machine,
 }
 
 /// Nanoseconds since 1970-01-01T00:00:00Z of a calendar date and time (UTC), or `None`
@@ -225,7 +226,8 @@ mod tests {
     fn layout_is_stable() {
         // Loader and kernel are built separately: these sizes are part of the contract.
         assert_eq!(core::mem::size_of::<MemoryRegion>(), 24);
-        assert_eq!(core::mem::size_of::<BootInfo>(), 104);
+        assert_eq!(core::mem::size_of::<BootInfo>(), 480);
+        assert_eq!(core::mem::size_of::<crate::machine::Machine>(), 384);
         assert_eq!(core::mem::size_of::<PhysRange>(), 16);
     }
 
@@ -260,7 +262,7 @@ mod tests {
             memory_regions: 0x1000,
             direct_map_base: DIRECT_MAP_BASE,
             direct_map_size: 1 << 32,
-            rsdp: 0,
+            machine: crate::machine::Machine::EMPTY,
             system_image: PhysRange::default(),
             trampoline: PhysRange::default(),
             page_table_root: 0,

@@ -2,7 +2,7 @@
 //!
 //! What lives here is a contract between separately built programs (loader, kernel, system
 //! software, partitions, host tools) and must stay stable: the boot-information block the
-//! loader hands the kernel ([`boot`]), the system-image archive format ([`sysimg`]) and the
+//! loader hands the kernel ([`boot`], with the machine it found in [`machine`]), the system-image archive format ([`sysimg`]) and the
 //! checksum they use ([`crc32`]), the system-call interface ([`syscall`], with the register of
 //! each argument in [`args`]), the IPC and
 //! exception message layout ([`ipc`]), the loadable-segment rules of ELF images ([`elf`]), the field tables of binary records
@@ -19,6 +19,7 @@ pub mod crc32;
 pub mod elf;
 pub mod ipc;
 pub mod layout;
+pub mod machine;
 pub mod root;
 pub mod syscall;
 pub mod sysimg;

@@ -71,6 +71,10 @@ fn load() -> Result<core::convert::Infallible, String> {
     );
 
     let direct_map_size = direct_map_size()?;
+    let memory = IdentityMapped {
+        size: direct_map_size,
+    };
+    let machine = acpi_tables::parse(rsdp, &memory).map_err(|e| format!("ACPI: {e}"))?;
     tables.map_direct(DIRECT_MAP_BASE, direct_map_size)?;
 
     // The trampoline runs the instruction after `mov cr3` from its physical address, so its
@@ -116,7 +120,7 @@ fn load() -> Result<core::convert::Infallible, String> {
         memory_regions: regions_phys,
         direct_map_base: DIRECT_MAP_BASE,
         direct_map_size,
-        rsdp,
+        machine,
         system_image,
         trampoline,
         page_table_root: tables.root(),
@@ -278,6 +282,24 @@ fn copy_system_image(image: &[u8]) -> Result<PhysRange, String> {
         start: phys,
         len: image.len() as u64,
     })
+}
+
+/// Physical memory as the firmware maps it while its boot services run (identity-mapped),
+/// up to `size` (what the kernel's direct map will cover).
+struct IdentityMapped {
+    size: u64,
+}
+
+impl acpi_tables::PhysMemory for IdentityMapped {
+    #[allow(unsafe_code)] // reads firmware tables at their physical addresses
+    fn bytes(&self, phys: u64, len: usize) -> Option<&[u8]> {
+        if phys == 0 || phys.checked_add(len as u64)? > self.size {
+            return None;
+        }
+        // SAFETY: UEFI identity-maps the memory its map lists, ACPI tables included, and
+        // nothing writes them while the loader reads.
+        Some(unsafe { core::slice::from_raw_parts(phys as *const u8, len) })
+    }
 }
 
 fn find_rsdp() -> u64 {

@@ -47,14 +47,14 @@ pub(super) struct CpuEntry {
     pub(super) stack_top: u64,
 }
 
-static mut CPU_ENTRIES: [CpuEntry; crate::acpi::MAX_CPUS] = [const {
+static mut CPU_ENTRIES: [CpuEntry; abi::machine::MAX_CPUS] = [const {
     CpuEntry {
         this: 0,
         user_rsp: 0,
         active_frame: 0,
         stack_top: 0,
     }
-}; crate::acpi::MAX_CPUS];
+}; abi::machine::MAX_CPUS];
 
 const IA32_GS_BASE: u32 = 0xc000_0101;
 

@@ -4,6 +4,7 @@
 //! [`set_line_masked`].
 
 use crate::mem::phys_to_virt;
+use abi::machine::InterruptOverride;
 use core::ptr::NonNull;
 use volatile::VolatilePtr;
 
@@ -20,6 +21,37 @@ pub struct IoApic {
     base: u64,
 }
 
+/// Electrical properties of a global system interrupt.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Signal {
+    pub active_low: bool,
+    pub level_triggered: bool,
+}
+
+/// How input `gsi` is signalled: as an override (MADT flags: polarity bits 0-1, trigger
+/// bits 2-3; 0b11 = active low / level, 0b00 = the bus default) says, else ISA inputs
+/// (< 16) are edge-triggered active high and PCI inputs level-triggered active low.
+pub fn signal_of(gsi: u32, overrides: &[InterruptOverride]) -> Signal {
+    let isa = gsi < 16;
+    let default = Signal {
+        active_low: !isa,
+        level_triggered: !isa,
+    };
+    match overrides.iter().find(|o| o.gsi == gsi) {
+        None => default,
+        Some(o) => Signal {
+            active_low: match o.flags & 3 {
+                0 => default.active_low,
+                p => p == 3,
+            },
+            level_triggered: match (o.flags >> 2) & 3 {
+                0 => default.level_triggered,
+                t => t == 3,
+            },
+        },
+    }
+}
+
 /// The IOAPIC for lines 0.. and each line's redirection entry (low word, masked).
 struct Lines {
     apic: IoApic,
@@ -31,15 +63,11 @@ static LINES: spin::Once<Lines> = spin::Once::new();
 
 /// Makes `apic` (whose inputs start at 0) the one for user lines: every line it has gets
 /// its vector, signal properties and destination, and stays masked.
-pub fn install(
-    apic: IoApic,
-    destination_apic_id: u32,
-    overrides: &[crate::acpi::InterruptOverride],
-) {
+pub fn install(apic: IoApic, destination_apic_id: u32, overrides: &[InterruptOverride]) {
     let count = apic.line_count().min(crate::irq::LINES as u32);
     let mut entries = [MASKED; crate::irq::LINES];
     for line in 0..count {
-        let signal = crate::acpi::signal_of(line, overrides);
+        let signal = signal_of(line, overrides);
         entries[line as usize] = MASKED
             | (LINE_VECTOR_BASE as u32 + line)
             | (signal.active_low as u32) << 13
@@ -107,3 +135,7 @@ impl IoApic {
         }
     }
 }
+
+#[cfg(test)]
+#[path = "../../host-tests/ioapic.rs"]
+mod tests;

@@ -6,11 +6,11 @@
 //! (docs/status.md).
 
 use super::{gdt, idt, lapic};
-use crate::acpi::AcpiInfo;
 use crate::boot::{DirectMapLinks, FRAMES};
 use crate::kprintln;
 use crate::mem::{PAGE_SIZE, phys_to_virt};
 use abi::boot::{MemoryKind, MemoryRegion};
+use abi::machine::Machine;
 use core::sync::atomic::{AtomicUsize, Ordering};
 use x86_64::VirtAddr;
 use x86_64::registers::control::{Cr0, Cr3, Cr4};
@@ -112,19 +112,20 @@ pub fn trampoline_pages(regions: &[MemoryRegion]) -> Option<u64> {
 /// Starts every AP the MADT lists, one at a time; returns the number of CPUs online. A
 /// machine with one CPU passes through without a change or a log line.
 pub fn start_application_processors(
-    acpi: &AcpiInfo,
+    machine: &Machine,
     boot_apic: u32,
     regions: &[MemoryRegion],
 ) -> usize {
-    if acpi.cpus_ignored > 0 {
+    if machine.cpus_ignored > 0 {
         kprintln!(
             "smp: {} processor entr(y/ies) of the MADT ignored (beyond the {} CPUs supported, repeated, x2APIC-only or malformed)",
-            acpi.cpus_ignored,
-            crate::acpi::MAX_CPUS
+            machine.cpus_ignored,
+            abi::machine::MAX_CPUS
         );
     }
     let aps = || {
-        acpi.cpu_apic_ids
+        machine
+            .cpu_apic_ids()
             .iter()
             .filter(|&&a| u32::from(a) != boot_apic)
     };
@@ -172,7 +173,7 @@ pub fn start_application_processors(
         // SAFETY: the frames are big and aligned enough (test `a_cpu_block_fits_its_
         // reserved_frames`), and all zeros is a CpuBlock (numbers, an empty GDT, a TSS).
         let cpu = unsafe { &mut *(block.as_mut_ptr() as *mut CpuBlock) };
-        (cpu.number, cpu.cr3, cpu.lapic) = (number, pml4, acpi.local_apic_address);
+        (cpu.number, cpu.cr3, cpu.lapic) = (number, pml4, machine.local_apic_address);
         (cpu.cr0, cpu.cr4, cpu.efer) = (Cr0::read_raw(), Cr4::read_raw(), Efer::read_raw());
         put(low, 16, cpu.stack.0.as_ptr() as u64 + STACK_SIZE as u64 - 8);
         put(low, 32, cpu as *mut CpuBlock as u64);

@@ -1,90 +1,17 @@
-//! ACPI table discovery: RSDP -> XSDT/RSDT -> MADT (local APIC, IOAPICs, interrupt source
-//! overrides, CPUs), HPET and DMAR (the VT-d DMA remapping unit). Pure parsing over a [`PhysMemory`] view, so it is host-tested
-//! with synthetic tables; every table is length- and checksum-checked before use.
+//! The firmware's ACPI tables as the loader reads them before it starts the kernel: RSDP ->
+//! XSDT/RSDT -> MADT (local APIC, IOAPICs, interrupt source overrides, CPUs), HPET and
+//! DMAR (the VT-d DMA remapping unit), into the fixed-size [`Machine`] block the kernel
+//! reads (`abi::machine`). Pure parsing over a [`PhysMemory`] view, host-tested with
+//! synthetic tables; every table is length- and checksum-checked before use, and a damaged
+//! table is an [`AcpiError`], never a panic.
+#![no_std]
 
-extern crate alloc;
+use abi::machine::{InterruptOverride, IoApicInfo, Machine};
 
-use alloc::vec::Vec;
-
-/// Read access to physical memory (the direct map on the target).
+/// Read access to physical memory (the firmware's identity map in the loader).
 pub trait PhysMemory {
     /// `len` bytes at physical address `phys`, or `None` if not mapped.
     fn bytes(&self, phys: u64, len: usize) -> Option<&[u8]>;
-}
-
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct IoApicInfo {
-    pub id: u8,
-    pub address: u64,
-    pub gsi_base: u32,
-}
-
-/// An ISA IRQ that the firmware wired to a different global system interrupt.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct InterruptOverride {
-    pub isa_irq: u8,
-    pub gsi: u32,
-    pub flags: u16,
-}
-
-/// Electrical properties of a global system interrupt.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Signal {
-    pub active_low: bool,
-    pub level_triggered: bool,
-}
-
-/// How input `gsi` is signalled: as an override (MADT flags: polarity bits 0-1, trigger
-/// bits 2-3; 0b11 = active low / level, 0b00 = the bus default) says, else ISA inputs
-/// (< 16) are edge-triggered active high and PCI inputs level-triggered active low.
-pub fn signal_of(gsi: u32, overrides: &[InterruptOverride]) -> Signal {
-    let isa = gsi < 16;
-    let default = Signal {
-        active_low: !isa,
-        level_triggered: !isa,
-    };
-    match overrides.iter().find(|o| o.gsi == gsi) {
-        None => default,
-        Some(o) => Signal {
-            active_low: match o.flags & 3 {
-                0 => default.active_low,
-                p => p == 3,
-            },
-            level_triggered: match (o.flags >> 2) & 3 {
-                0 => default.level_triggered,
-                t => t == 3,
-            },
-        },
-    }
-}
-
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
-pub struct AcpiInfo {
-    pub revision: u8,
-    pub local_apic_address: u64,
-    /// APIC IDs of enabled (or online-capable) processors, at most [`MAX_CPUS`], each once.
-    pub cpu_apic_ids: Vec<u8>,
-    /// Processor entries left out: beyond [`MAX_CPUS`], a repeated APIC ID, x2APIC-only
-    /// (ID above 254, or 255, the broadcast ID) or of the wrong length. Boot logs the count.
-    pub cpus_ignored: usize,
-    pub io_apics: Vec<IoApicInfo>,
-    pub overrides: Vec<InterruptOverride>,
-    pub hpet_address: Option<u64>,
-    /// The DMA remapping unit (DMAR), when there is exactly one, on PCI segment 0: the
-    /// only layout the kernel programs (QEMU's `intel-iommu`); any other means no usable
-    /// IOMMU.
-    pub dma_remapping: Option<DmaRemapping>,
-}
-
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
-pub struct DmaRemapping {
-    /// Its register base.
-    pub base: u64,
-    /// Whether it translates every PCI function (INCLUDE_PCI_ALL); else only `endpoints`:
-    /// the routing ids (bus << 8 | device << 3 | function) of its device scopes that name
-    /// a function on the scope's bus (functions behind bridges count as not covered).
-    pub all: bool,
-    pub endpoints: Vec<u16>,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -103,11 +30,8 @@ impl core::fmt::Display for AcpiError {
             Self::BadRsdp(why) => write!(f, "invalid RSDP: {why}"),
             Self::Unmapped(at) => write!(f, "ACPI table at {at:#x} is outside mapped memory"),
             Self::BadTable(sig, why) => {
-                write!(
-                    f,
-                    "ACPI table {}: {why}",
-                    core::str::from_utf8(sig).unwrap_or("????")
-                )
+                let name = core::str::from_utf8(sig).unwrap_or("????");
+                write!(f, "ACPI table {name}: {why}")
             }
             Self::NoMadt => write!(
                 f,
@@ -116,9 +40,6 @@ impl core::fmt::Display for AcpiError {
         }
     }
 }
-
-/// CPUs the kernel brings up (the boot CPU included); the machines have up to 4.
-pub const MAX_CPUS: usize = 8;
 
 fn checksum_ok(bytes: &[u8]) -> bool {
     bytes.iter().fold(0u8, |sum, b| sum.wrapping_add(*b)) == 0
@@ -159,7 +80,8 @@ fn table(mem: &impl PhysMemory, phys: u64) -> Result<([u8; 4], &[u8]), AcpiError
     Ok((signature, bytes))
 }
 
-pub fn parse(rsdp: u64, mem: &impl PhysMemory) -> Result<AcpiInfo, AcpiError> {
+/// The machine the tables at `rsdp` describe.
+pub fn parse(rsdp: u64, mem: &impl PhysMemory) -> Result<Machine, AcpiError> {
     if rsdp == 0 {
         return Err(AcpiError::NoRsdp);
     }
@@ -188,9 +110,9 @@ pub fn parse(rsdp: u64, mem: &impl PhysMemory) -> Result<AcpiInfo, AcpiError> {
             "root table is neither XSDT nor RSDT",
         ));
     }
-    let mut info = AcpiInfo {
-        revision,
-        ..AcpiInfo::default()
+    let mut machine = Machine {
+        acpi_revision: revision.into(),
+        ..Machine::EMPTY
     };
     let mut found_madt = false;
     for entry in root_table[HEADER_LEN..].chunks_exact(entry_size) {
@@ -202,17 +124,17 @@ pub fn parse(rsdp: u64, mem: &impl PhysMemory) -> Result<AcpiInfo, AcpiError> {
         let (signature, body) = table(mem, phys)?;
         match &signature {
             b"APIC" => {
-                parse_madt(body, &mut info)?;
+                parse_madt(body, &mut machine)?;
                 found_madt = true;
             }
-            b"DMAR" => info.dma_remapping = parse_dmar(body)?,
+            b"DMAR" => parse_dmar(body, &mut machine)?,
             b"HPET" => {
                 if body.len() < 52 {
                     return Err(AcpiError::BadTable(signature, "too short"));
                 }
                 // Generic address structure at 40: space id 0 = system memory.
                 if body[40] == 0 {
-                    info.hpet_address = Some(u64_at(body, 44));
+                    machine.hpet_address = u64_at(body, 44);
                 }
             }
             _ => {}
@@ -221,21 +143,21 @@ pub fn parse(rsdp: u64, mem: &impl PhysMemory) -> Result<AcpiInfo, AcpiError> {
     if !found_madt {
         return Err(AcpiError::NoMadt);
     }
-    Ok(info)
+    Ok(machine)
 }
 
-/// The DMAR table's single remapping unit (see [`AcpiInfo::dma_remapping`]). Remapping
+/// The DMAR table's single remapping unit (see [`Machine::dma_base`]). Remapping
 /// structures start at 48: type (u16), length (u16); type 0 (DRHD) has flags at 4 (bit 0
 /// INCLUDE_PCI_ALL), the segment at 6, the register base at 8 and device scopes from 16:
 /// type (1 = endpoint), length, 2 reserved, enumeration id, start bus, then (device,
 /// function) path entries.
-fn parse_dmar(dmar: &[u8]) -> Result<Option<DmaRemapping>, AcpiError> {
+fn parse_dmar(dmar: &[u8], machine: &mut Machine) -> Result<(), AcpiError> {
     const SIG: [u8; 4] = *b"DMAR";
     let bad = |why| Err(AcpiError::BadTable(SIG, why));
     if dmar.len() < 48 {
         return bad("too short");
     }
-    let (mut units, mut found) = (0, None);
+    let (mut units, mut usable) = (0, false);
     let mut at = 48;
     while at + 4 <= dmar.len() {
         let (kind, len) = (u16_at(dmar, at), usize::from(u16_at(dmar, at + 2)));
@@ -247,11 +169,9 @@ fn parse_dmar(dmar: &[u8]) -> Result<Option<DmaRemapping>, AcpiError> {
                 return bad("DRHD shorter than 16 bytes");
             }
             units += 1;
-            let mut unit = DmaRemapping {
-                base: u64_at(dmar, at + 8),
-                all: dmar[at + 4] & 1 != 0,
-                endpoints: Vec::new(),
-            };
+            machine.dma_base = u64_at(dmar, at + 8);
+            machine.dma_all = u32::from(dmar[at + 4] & 1);
+            machine.dma_endpoint_count = 0;
             let mut scope = at + 16;
             while scope + 2 <= at + len {
                 let end = scope + usize::from(dmar[scope + 1]);
@@ -262,23 +182,33 @@ fn parse_dmar(dmar: &[u8]) -> Result<Option<DmaRemapping>, AcpiError> {
                 if s[0] == 1 && s.len() == 8 {
                     let id =
                         u16::from(s[5]) << 8 | u16::from(s[6] & 0x1f) << 3 | u16::from(s[7] & 7);
-                    unit.endpoints.push(id);
+                    // Beyond the array a function counts as not covered (no DMA for it).
+                    let (slots, count) =
+                        (&mut machine.dma_endpoints, &mut machine.dma_endpoint_count);
+                    push(slots, count, &mut 0, id);
                 }
                 scope += s.len();
             }
-            found = (u16_at(dmar, at + 6) == 0).then_some(unit);
+            usable = u16_at(dmar, at + 6) == 0;
         }
         at += len;
     }
-    Ok(if units == 1 { found } else { None })
+    if units != 1 || !usable {
+        (
+            machine.dma_base,
+            machine.dma_all,
+            machine.dma_endpoint_count,
+        ) = (0, 0, 0);
+    }
+    Ok(())
 }
 
-fn parse_madt(madt: &[u8], info: &mut AcpiInfo) -> Result<(), AcpiError> {
+fn parse_madt(madt: &[u8], machine: &mut Machine) -> Result<(), AcpiError> {
     const SIG: [u8; 4] = *b"APIC";
     if madt.len() < 44 {
         return Err(AcpiError::BadTable(SIG, "too short"));
     }
-    info.local_apic_address = u32_at(madt, 36) as u64;
+    machine.local_apic_address = u32_at(madt, 36) as u64;
     let mut at = 44;
     while at + 2 <= madt.len() {
         let (kind, len) = (madt[at], madt[at + 1] as usize);
@@ -290,28 +220,49 @@ fn parse_madt(madt: &[u8], info: &mut AcpiInfo) -> Result<(), AcpiError> {
             // Processor local APIC: enabled (bit 0) or online capable (bit 1).
             (0, 8) if u32_at(e, 4) & 0b11 != 0 => {
                 // 0xff is the xAPIC broadcast destination: an IPI to it would reach every CPU.
-                let (id, ids) = (e[3], &info.cpu_apic_ids);
-                if ids.len() == MAX_CPUS || ids.contains(&id) || id == 0xff {
-                    info.cpus_ignored += 1;
+                let id = e[3];
+                if machine.cpu_apic_ids().contains(&id) || id == 0xff {
+                    machine.cpus_ignored += 1;
                 } else {
-                    info.cpu_apic_ids.push(id);
+                    push(
+                        &mut machine.cpu_apic_ids,
+                        &mut machine.cpu_count,
+                        &mut machine.cpus_ignored,
+                        id,
+                    );
                 }
             }
             // A processor local x2APIC (enabled or online capable): its ID needs x2APIC mode.
-            (9, 16) if u32_at(e, 8) & 0b11 != 0 => info.cpus_ignored += 1,
+            (9, 16) if u32_at(e, 8) & 0b11 != 0 => machine.cpus_ignored += 1,
             // A processor entry of the wrong length.
-            (0, _) | (9, _) if len != [8, 16][usize::from(kind == 9)] => info.cpus_ignored += 1,
-            (1, 12) => info.io_apics.push(IoApicInfo {
-                id: e[2],
-                address: u32_at(e, 4) as u64,
-                gsi_base: u32_at(e, 8),
-            }),
-            (2, 10) => info.overrides.push(InterruptOverride {
-                isa_irq: e[3],
-                gsi: u32_at(e, 4),
-                flags: u16_at(e, 8),
-            }),
-            (5, 12) => info.local_apic_address = u64_at(e, 4),
+            (0, _) | (9, _) if len != [8, 16][usize::from(kind == 9)] => machine.cpus_ignored += 1,
+            (1, 12) => {
+                let io_apic = IoApicInfo {
+                    id: e[2],
+                    address: u32_at(e, 4) as u64,
+                    gsi_base: u32_at(e, 8),
+                };
+                push(
+                    &mut machine.io_apics,
+                    &mut machine.io_apic_count,
+                    &mut machine.entries_ignored,
+                    io_apic,
+                );
+            }
+            (2, 10) => {
+                let entry = InterruptOverride {
+                    isa_irq: e[3],
+                    gsi: u32_at(e, 4),
+                    flags: u16_at(e, 8),
+                };
+                push(
+                    &mut machine.overrides,
+                    &mut machine.override_count,
+                    &mut machine.entries_ignored,
+                    entry,
+                );
+            }
+            (5, 12) => machine.local_apic_address = u64_at(e, 4),
             _ => {}
         }
         at += len;
@@ -319,6 +270,14 @@ fn parse_madt(madt: &[u8], info: &mut AcpiInfo) -> Result<(), AcpiError> {
     Ok(())
 }
 
+/// Puts `value` in the next free one of `slots` (`count` in use), or counts it in
+/// `ignored` when all are.
+fn push<T>(slots: &mut [T], count: &mut u32, ignored: &mut u32, value: T) {
+    match slots.get_mut(*count as usize) {
+        Some(slot) => (*slot, *count) = (value, *count + 1),
+        None => *ignored += 1,
+    }
+}
+
 #[cfg(test)]
-#[path = "../host-tests/acpi.rs"]
 mod tests;

@@ -1,8 +1,12 @@
-//! Host tests of the ACPI table parsing (`kernel/src/acpi.rs`); kept outside `src` so that
-//! the ring-0 code budget counts only what runs in ring 0.
+//! Host tests of the ACPI table parsing, with synthetic tables.
+
+extern crate std;
 
 use super::*;
+use abi::machine::MAX_CPUS;
 use std::collections::BTreeMap;
+use std::vec;
+use std::vec::Vec;
 
 /// Physical memory made of placed byte blobs.
 #[derive(Default)]
@@ -77,24 +81,26 @@ fn finds_interrupt_controllers_and_hpet() {
     let mem = system(vec![madt(), hpet()]);
     let info = parse(0xe0000, &mem).unwrap();
     assert_eq!(info.local_apic_address, 0xfee0_0000);
-    assert_eq!(info.cpu_apic_ids, vec![0]);
+    assert_eq!(info.acpi_revision, 2);
+    assert_eq!(info.cpu_apic_ids(), [0]);
     assert_eq!(
-        info.io_apics,
-        vec![IoApicInfo {
+        info.io_apics(),
+        [IoApicInfo {
             id: 7,
             address: 0xfec0_0000,
             gsi_base: 0
         }]
     );
     assert_eq!(
-        info.overrides,
-        vec![InterruptOverride {
+        info.overrides(),
+        [InterruptOverride {
             isa_irq: 0,
             gsi: 2,
             flags: 0
         }]
     );
-    assert_eq!(info.hpet_address, Some(0xfed0_0000));
+    assert_eq!(info.hpet_address, 0xfed0_0000);
+    assert_eq!(info.entries_ignored, 0);
 }
 
 #[test]
@@ -130,43 +136,6 @@ fn truncated_madt_entry_is_an_error_not_a_panic() {
     );
 }
 
-#[test]
-fn signal_follows_overrides_and_bus_defaults() {
-    use super::{InterruptOverride, Signal, signal_of};
-    let overrides = [
-        InterruptOverride {
-            isa_irq: 0,
-            gsi: 2,
-            flags: 0,
-        },
-        InterruptOverride {
-            isa_irq: 9,
-            gsi: 9,
-            flags: 0b1101,
-        },
-    ];
-    let edge_high = Signal {
-        active_low: false,
-        level_triggered: false,
-    };
-    assert_eq!(signal_of(3, &overrides), edge_high);
-    assert_eq!(signal_of(2, &overrides), edge_high);
-    assert_eq!(
-        signal_of(9, &overrides),
-        Signal {
-            active_low: false,
-            level_triggered: true
-        }
-    );
-    assert_eq!(
-        signal_of(18, &[]),
-        Signal {
-            active_low: true,
-            level_triggered: true
-        }
-    );
-}
-
 /// A DMAR table (host address width 39 bits) with one DRHD per `(flags, segment, base)`,
 /// each listing an IOAPIC and the endpoints 00:03.0 and 00:1f.2 and a function behind a
 /// bridge (two path entries), as QEMU's `intel-iommu` lists the functions it translates.
@@ -193,27 +162,22 @@ fn dmar(units: &[(u8, u16, u64)]) -> Vec<u8> {
 #[test]
 fn finds_the_one_dma_remapping_unit_and_the_functions_it_translates() {
     let info = parse(0xe0000, &system(vec![madt()])).unwrap();
-    assert_eq!(info.dma_remapping, None, "no DMAR: no IOMMU");
+    assert_eq!(info.dma_base, 0, "no DMAR: no IOMMU");
     let mem = system(vec![madt(), dmar(&[(0, 0, 0xfed9_0000)])]);
-    assert_eq!(
-        parse(0xe0000, &mem).unwrap().dma_remapping,
-        Some(DmaRemapping {
-            base: 0xfed9_0000,
-            all: false,
-            endpoints: vec![3 << 3, 0x1f << 3 | 2],
-        })
-    );
+    let info = parse(0xe0000, &mem).unwrap();
+    assert_eq!((info.dma_base, info.dma_all), (0xfed9_0000, 0));
+    assert_eq!(info.dma_endpoints(), [3 << 3, 0x1f << 3 | 2]);
     let mem = system(vec![madt(), dmar(&[(1, 0, 0xfed9_0000)])]);
-    assert!(parse(0xe0000, &mem).unwrap().dma_remapping.unwrap().all);
+    assert_eq!(parse(0xe0000, &mem).unwrap().dma_all, 1);
     // Layouts the kernel does not program mean no usable IOMMU, never a wrong one.
     for units in [
         &[(1, 1, 0xfed9_0000)][..],                  // another PCI segment
         &[(1, 0, 0xfed9_0000), (0, 0, 0xfed9_1000)], // two units
     ] {
-        let mem = system(vec![madt(), dmar(units)]);
+        let info = parse(0xe0000, &system(vec![madt(), dmar(units)])).unwrap();
         assert_eq!(
-            parse(0xe0000, &mem).unwrap().dma_remapping,
-            None,
+            (info.dma_base, info.dma_endpoints()),
+            (0, &[][..]),
             "{units:?}"
         );
     }
@@ -281,8 +245,8 @@ fn local_apic(id: u8, flags: u32) -> Vec<u8> {
 fn processors_beyond_the_supported_count_are_counted_not_kept() {
     let entries: Vec<_> = (0..20).map(|id| local_apic(id, 1)).collect();
     let info = parse(0xe0000, &madt_with(&entries)).unwrap();
-    assert_eq!(info.cpu_apic_ids, (0..MAX_CPUS as u8).collect::<Vec<_>>());
-    assert_eq!(info.cpus_ignored, 20 - MAX_CPUS);
+    assert_eq!(info.cpu_apic_ids(), (0..MAX_CPUS as u8).collect::<Vec<_>>());
+    assert_eq!(info.cpus_ignored as usize, 20 - MAX_CPUS);
 }
 
 #[test]
@@ -302,7 +266,7 @@ fn repeated_x2apic_only_and_wrong_length_processors_are_ignored() {
         x2apic,
     ];
     let info = parse(0xe0000, &madt_with(&entries)).unwrap();
-    assert_eq!(info.cpu_apic_ids, vec![0, 2]);
+    assert_eq!(info.cpu_apic_ids(), [0, 2]);
     assert_eq!(info.cpus_ignored, 5);
 }
 
@@ -322,4 +286,24 @@ fn a_processor_entry_running_past_the_madt_is_an_error() {
     body.extend_from_slice(&[0, 0, 1, 1]); // zero length would loop for ever
     let mem = system(vec![sdt(b"APIC", &body)]);
     assert!(parse(0xe0000, &mem).is_err());
+}
+
+#[test]
+fn ioapics_and_overrides_beyond_their_arrays_are_counted_not_kept() {
+    use abi::machine::{MAX_IO_APICS, MAX_OVERRIDES};
+    let mut entries = Vec::new();
+    for id in 0..MAX_IO_APICS as u8 + 2 {
+        entries.push(vec![1, 12, id, 0, 0, 0, 0xc0, 0xfe, 0, 0, 0, 0]);
+    }
+    for irq in 0..MAX_OVERRIDES as u8 + 3 {
+        entries.push(vec![2, 10, 0, irq, irq, 0, 0, 0, 0, 0]);
+    }
+    let info = parse(0xe0000, &madt_with(&entries)).unwrap();
+    assert_eq!(info.io_apics().len(), MAX_IO_APICS);
+    assert_eq!(info.overrides().len(), MAX_OVERRIDES);
+    assert_eq!(
+        info.overrides()[MAX_OVERRIDES - 1].isa_irq,
+        MAX_OVERRIDES as u8 - 1
+    );
+    assert_eq!(info.entries_ignored, 5);
 }
