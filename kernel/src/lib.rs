@@ -4,15 +4,16 @@
 //! physical frame allocator, and the kernel objects: tasks, threads, abilities, resource
 //! partitions, address spaces, synchronous IPC, notifications, exceptions as messages, time
 //! partitions, interrupt lines and I/O-port grants (`docs/architecture.md` maps each to its
-//! file). What it must never do: hold policy (that belongs to the system software), allocate
-//! from a heap (it has none: the loader parses the firmware's tables into the fixed-size
-//! `abi::machine::Machine`), panic on anything user space or a validated configuration
-//! hands it, or loop without bound over user input.
+//! file). What it must never do: hold policy (that belongs to the system software),
+//! allocate from a heap (it has none: the loader parses the firmware's tables into the
+//! fixed-size `abi::machine::Machine`), panic on anything user space or a validated
+//! configuration hands it, or loop without bound over user input.
 //!
 //! Hardware glue lives in [`arch`]; the pure logic (object operations through the syscall
-//! dispatcher, scheduling, time partitions, [`mem::frames`], log formatting) is host-testable with `cargo test -p kernel --lib`. `unsafe` is allowed only
-//! where hardware or raw memory demands it: [`arch`], [`mem`], [`boot`] and the functions
-//! marked with their own `allow`.
+//! dispatcher, scheduling, time partitions, [`mem::frames`], log formatting) is
+//! host-testable with `cargo test -p kernel --lib`. `unsafe` is allowed only where hardware
+//! or raw memory demands it: [`arch`], [`mem`], [`boot`] and the functions marked with
+//! their own `allow`.
 #![cfg_attr(not(test), no_std)]
 
 #[allow(unsafe_code)] // descriptor tables, port and register access, entry stubs

@@ -2,12 +2,13 @@
 //!
 //! What lives here is a contract between separately built programs (loader, kernel, system
 //! software, partitions, host tools) and must stay stable: the boot-information block the
-//! loader hands the kernel ([`boot`], with the machine it found in [`machine`]), the system-image archive format ([`sysimg`]) and the
-//! checksum they use ([`crc32`]), the system-call interface ([`syscall`], with the register of
-//! each argument in [`args`]), the IPC and
-//! exception message layout ([`ipc`]), the loadable-segment rules of ELF images ([`elf`]), the field tables of binary records
-//! ([`layout`]) and the root task's start information ([`root`]).
-//! It must never contain kernel policy or anything that needs an allocator (the `std` feature adds host-side writers only).
+//! loader hands the kernel ([`boot`], with the machine it found in [`machine`]), the
+//! system-image archive format ([`sysimg`]) and the checksum they use ([`crc32`]), the
+//! system-call interface ([`syscall`], with the register of each argument in [`args`]), the
+//! IPC and exception message layout ([`ipc`]), the loadable-segment rules of ELF images
+//! ([`elf`]), the field tables of binary records ([`layout`]) and the root task's start
+//! information ([`root`]). It must never contain kernel policy or anything that needs an
+//! allocator (the `std` feature adds host-side writers only).
 #![no_std]
 
 #[cfg(feature = "std")]

@@ -43,10 +43,12 @@ pub struct Machine {
     /// The RSDP's revision.
     pub acpi_revision: u32,
     /// Processor entries left out: beyond [`MAX_CPUS`], a repeated APIC ID, x2APIC-only
-    /// (ID above 254, or 255, the broadcast ID) or of the wrong length. Boot logs the count.
+    /// (ID above 254, or 255, the broadcast ID) or of the wrong length (boot logs the
+    /// count).
     pub cpus_ignored: u32,
     pub local_apic_address: u64,
-    /// The first `cpu_count`: APIC IDs of enabled (or online-capable) processors, each once.
+    /// The first `cpu_count`: APIC IDs of enabled (or online-capable) processors, each
+    /// once.
     pub cpu_apic_ids: [u8; MAX_CPUS],
     pub cpu_count: u32,
     pub io_apic_count: u32,

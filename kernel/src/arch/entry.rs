@@ -7,9 +7,10 @@
 //! the CPU's kernel stack for the portable code, which decides, and return through the
 //! frame `active_frame` then points to: switching threads copies no registers. The stubs
 //! find their CPU's [`CpuEntry`] through GS: in kernel mode GS's base is that block, in
-//! user mode the running thread's (`swapgs` on every entry from and exit to ring 3). A `syscall` entry returns with
-//! `sysret` when the frame allows it (`rcx` = `rip`, `r11` = `rflags`, as for any thread
-//! that entered by `syscall`), else with `iretq`, which restores every register.
+//! user mode the running thread's (`swapgs` on every entry from and exit to ring 3). A
+//! `syscall` entry returns with `sysret` when the frame allows it (`rcx` = `rip`, `r11` =
+//! `rflags`, as for any thread that entered by `syscall`), else with `iretq`, which
+//! restores every register.
 //!
 //! With nothing to run the CPU halts with interrupts enabled *inside* the exit path; an
 //! interrupt then arrives in ring 0 on the kernel stack, updates the kernel state and

@@ -1,8 +1,8 @@
 //! Application-processor (AP) bring-up: each CPU the MADT lists besides the boot CPU is
 //! started with INIT-SIPI-SIPI through a trampoline in a low page (real mode -> protected
 //! mode -> long mode), gets its own GDT, TSS, IST stacks and kernel stack from frames
-//! reserved at boot, takes on the boot CPU's control registers and page tables, and, while it
-//! waits, beats its own local APIC timer ([`heartbeat`]). Nothing is scheduled on it yet
+//! reserved at boot, takes on the boot CPU's control registers and page tables, and, while
+//! it waits, beats its own local APIC timer ([`heartbeat`]). Nothing is scheduled on it yet
 //! (docs/status.md).
 
 use super::{gdt, idt, lapic};
@@ -285,9 +285,10 @@ extern "sysv64" fn ap_entry(block: *mut CpuBlock) -> ! {
 /// Beats a second of an AP's local APIC timer while it waits.
 const HEARTBEAT_HZ: u64 = 100;
 
-/// An AP's wait: its own local APIC timer beats [`HEARTBEAT_HZ`] times a second (periodic,
-/// vector [`idt::HEARTBEAT_VECTOR`]) and each second the AP logs `cpu <n>: heartbeat <beats>
-/// longest_gap_us=<us>`: the proof that each core takes its own timer's interrupts on time.
+/// An AP's wait: its own local APIC timer beats [`HEARTBEAT_HZ`] times a second
+/// (periodic, vector [`idt::HEARTBEAT_VECTOR`]) and each second the AP logs `cpu <n>:
+/// heartbeat <beats> longest_gap_us=<us>`: the proof that each core takes its own timer's
+/// interrupts on time.
 /// The AP touches no kernel object, so it never takes the kernel's lock.
 fn heartbeat(number: u64) -> ! {
     let ticks = lapic::timer_hz() / HEARTBEAT_HZ;
