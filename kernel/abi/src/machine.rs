@@ -8,7 +8,7 @@
 //! slot. The accessors bound every count by its array, so a damaged block can shorten a
 //! list but never make the kernel read past it.
 
-/// CPUs the kernel brings up (the boot CPU included); the machines have up to 4.
+/// CPUs the kernel brings up (the boot CPU included); `-smp` runs here use up to 4.
 pub const MAX_CPUS: usize = 8;
 /// IOAPICs listed (the kernel programs the one at GSI 0).
 pub const MAX_IO_APICS: usize = 8;
