@@ -394,6 +394,7 @@ impl Window {
             offset: self.offset,
             duration: self.duration,
             partition: self.time_partition as u64,
+            cpu: 0,
         }
     }
 }

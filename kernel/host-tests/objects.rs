@@ -1128,6 +1128,7 @@ fn an_early_timer_interrupt_rearms_the_timer() {
         offset: 0,
         duration: 1_000_000,
         partition: 1,
+        cpu: 0,
     }];
     f.write(root, BUFFER_AT, window_bytes(&windows));
     assert_eq!(
@@ -1135,19 +1136,19 @@ fn an_early_timer_interrupt_rearms_the_timer() {
         OK
     );
     assert_eq!(f.sys(root, Call::ScheduleSwitch, [0, 0, 0, 0, 0, 0]), OK);
-    f.k.timer_dirty = false;
+    f.k.core_mut().timer_dirty = false;
     // The one-shot count is rounded down, so it may fire just before the boundary: nothing
     // changes, but the timer must be programmed again or the boundary would be missed.
-    f.k.on_timer(f.k.next_boundary - 1);
-    assert_eq!(f.k.active_partition, Some(1));
-    assert!(f.k.timer_dirty);
+    f.k.on_timer(f.k.core().next_boundary - 1);
+    assert_eq!(f.k.core().active_partition, Some(1));
+    assert!(f.k.core().timer_dirty);
     assert_eq!(f.k.next_event(), 1_000_000);
 }
 
 /// The bytes of a slice of plain-old-data window specs, as user space passes them.
 #[allow(unsafe_code)] // a view of plain-old-data structs as bytes
 fn window_bytes(windows: &[abi::syscall::WindowSpec]) -> &[u8] {
-    // SAFETY: WindowSpec is repr(C) of three u64 (no padding); the slice is alive.
+    // SAFETY: WindowSpec is repr(C) of four u64 (no padding); the slice is alive.
     unsafe { std::slice::from_raw_parts(windows.as_ptr().cast(), std::mem::size_of_val(windows)) }
 }
 
@@ -1169,7 +1170,7 @@ proptest::proptest! {
         let mut at = 0;
         for &(gap, length, partition) in &gaps {
             at += gap * 1_000_000;
-            windows.push(abi::syscall::WindowSpec { offset: at, duration: length * 1_000_000, partition });
+            windows.push(abi::syscall::WindowSpec { offset: at, duration: length * 1_000_000, partition, cpu: 0 });
             at += length * 1_000_000;
         }
         let major = at + 1_000_000;
@@ -1205,7 +1206,7 @@ proptest::proptest! {
                 let at_best = |tp: u8| made.iter().find(|&&(_, t, q)| q == p && t == tp).map(|&(t, ..)| t);
                 active.filter(|&a| a != 0).and_then(at_best).or_else(|| at_best(0))
             });
-            proptest::prop_assert_eq!(f.k.active_partition.filter(|&p| p != 0), active, "active window at {}", now);
+            proptest::prop_assert_eq!(f.k.core().active_partition.filter(|&p| p != 0), active, "active window at {}", now);
             proptest::prop_assert_eq!(f.k.choose(), expected, "chosen thread at {}", now);
         }
     }

@@ -204,11 +204,11 @@ pub fn start(boot_info: u64) -> ! {
         panic!("system.img has no 'syssw' entry (the root task)")
     };
     crate::arch::cpu::enable_sse_for_user();
-    crate::arch::syscall::init(0, crate::arch::stack::top());
-    crate::arch::smp::start_application_processors(machine, apic_id, regions);
+    crate::arch::syscall::init(0, crate::arch::stack::top(), crate::arch::gdt::boot_tss());
+    let online = crate::arch::smp::start_application_processors(machine, apic_id, regions);
     {
         let mut k = crate::arch::entry::KERNEL.lock();
-        k.dma = dma;
+        (k.dma, k.online) = (dma, online);
         let entry = crate::task::create_root(
             &mut k,
             syssw.data,

@@ -124,9 +124,7 @@ impl Kernel {
             w[a] &= !first_mask | if a == b { !last_mask } else { 0 };
             w[b] &= !last_mask | if a == b { !first_mask } else { 0 };
         }
-        if self.io_loaded == self.task_id(target) {
-            self.io_loaded = TaskId::OWN;
-        }
+        self.forget_io_bitmap(target);
         Ok(())
     }
 
@@ -142,9 +140,15 @@ impl Kernel {
                 freed += 1;
             }
         }
-        if self.io_loaded == self.task_id(task) {
-            self.io_loaded = TaskId::OWN;
-        }
+        self.forget_io_bitmap(task);
         freed
+    }
+
+    /// The boot CPU's TSS must load `task`'s bitmap again before it runs (only the boot
+    /// CPU's TSS has an I/O bitmap: on the other CPUs every port is denied).
+    fn forget_io_bitmap(&mut self, task: TaskIdx) {
+        if self.cores[0].io_loaded == self.task_id(task) {
+            self.cores[0].io_loaded = TaskId::OWN;
+        }
     }
 }

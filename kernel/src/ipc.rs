@@ -124,6 +124,7 @@ impl Kernel {
                 return None;
             }
             let direct = them.priority() > me.priority()
+                && them.cpu() == me.cpu()
                 && (them.time_partition() == me.time_partition() || them.time_partition() == 0);
             let outcome = if direct {
                 Outcome::SwitchTo(peer)

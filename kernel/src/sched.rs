@@ -1,15 +1,16 @@
 //! Ready queues: fixed priorities 0..=255, FIFO within a priority, O(1) choice.
 //!
-//! One set of queues per time partition. The eligible threads at any instant are those of
-//! time partition 0 (background) plus those of the active partition, if any; the highest
-//! priority wins, and on equal priority the active partition's thread wins over the
-//! background. Queues are intrusive doubly-linked lists over thread slot indices, with a
+//! One set of queues per CPU and time partition: a thread runs on one CPU. The eligible
+//! threads of a CPU at any instant are its threads of time partition 0 (background) plus
+//! those of its active window's partition, if any; the highest priority wins, and on equal
+//! priority the active partition's thread wins over the background. Queues are intrusive doubly-linked lists over thread slot indices, with a
 //! 256-bit bitmap per partition for the non-empty priorities, so enqueue, dequeue and
 //! choice are constant time. The running thread stays at the head of its queue: a
 //! preempted thread resumes before its peers, and [`RunQueues::rotate`] implements yield.
 
 pub const PRIORITIES: usize = 256;
 pub const TIME_PARTITIONS: usize = abi::syscall::TIME_PARTITIONS as usize;
+pub const CPUS: usize = abi::machine::MAX_CPUS;
 const NIL: u16 = u16::MAX;
 
 #[derive(Clone, Copy)]
@@ -29,11 +30,19 @@ struct Partition {
 }
 
 pub struct RunQueues<const THREADS: usize> {
-    partitions: [Partition; TIME_PARTITIONS],
+    partitions: [[Partition; TIME_PARTITIONS]; CPUS],
     next: [u16; THREADS],
     prev: [u16; THREADS],
-    /// Where each queued thread is (priority, time partition); `None` when not queued.
-    place: [Option<(u8, u8)>; THREADS],
+    /// Where each queued thread is; `None` when not queued.
+    place: [Option<Place>; THREADS],
+}
+
+/// A queued thread's queue: its priority, time partition and CPU.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Place {
+    pub priority: u8,
+    pub partition: u8,
+    pub cpu: u8,
 }
 
 impl<const THREADS: usize> Default for RunQueues<THREADS> {
@@ -47,11 +56,13 @@ impl<const THREADS: usize> RunQueues<THREADS> {
         assert!(THREADS < NIL as usize);
         Self {
             partitions: [const {
-                Partition {
-                    queues: [EMPTY; PRIORITIES],
-                    bitmap: [0; PRIORITIES / 64],
-                }
-            }; TIME_PARTITIONS],
+                [const {
+                    Partition {
+                        queues: [EMPTY; PRIORITIES],
+                        bitmap: [0; PRIORITIES / 64],
+                    }
+                }; TIME_PARTITIONS]
+            }; CPUS],
             next: [NIL; THREADS],
             prev: [NIL; THREADS],
             place: [None; THREADS],
@@ -62,12 +73,17 @@ impl<const THREADS: usize> RunQueues<THREADS> {
         self.place[thread].is_some()
     }
 
-    /// Appends `thread` to the tail of its priority's queue (no-op if already queued).
-    pub fn enqueue(&mut self, thread: usize, priority: u8, partition: u8) {
+    /// Appends `thread` to the tail of its queue (no-op if already queued).
+    pub fn enqueue(&mut self, thread: usize, place: Place) {
         if self.is_queued(thread) {
             return;
         }
-        let p = &mut self.partitions[partition as usize];
+        let Place {
+            priority,
+            partition,
+            cpu,
+        } = place;
+        let p = &mut self.partitions[cpu as usize][partition as usize];
         let q = &mut p.queues[priority as usize];
         self.prev[thread] = q.tail;
         self.next[thread] = NIL;
@@ -78,15 +94,20 @@ impl<const THREADS: usize> RunQueues<THREADS> {
         }
         q.tail = thread as u16;
         p.bitmap[priority as usize / 64] |= 1 << (priority % 64);
-        self.place[thread] = Some((priority, partition));
+        self.place[thread] = Some(place);
     }
 
     /// Takes `thread` out of its queue (no-op if not queued).
     pub fn remove(&mut self, thread: usize) {
-        let Some((priority, partition)) = self.place[thread].take() else {
+        let Some(Place {
+            priority,
+            partition,
+            cpu,
+        }) = self.place[thread].take()
+        else {
             return;
         };
-        let p = &mut self.partitions[partition as usize];
+        let p = &mut self.partitions[cpu as usize][partition as usize];
         let q = &mut p.queues[priority as usize];
         let (prev, next) = (self.prev[thread], self.next[thread]);
         if prev == NIL {
@@ -106,14 +127,14 @@ impl<const THREADS: usize> RunQueues<THREADS> {
 
     /// Moves a queued thread to the tail of its queue (yield).
     pub fn rotate(&mut self, thread: usize) {
-        if let Some((priority, partition)) = self.place[thread] {
+        if let Some(place) = self.place[thread] {
             self.remove(thread);
-            self.enqueue(thread, priority, partition);
+            self.enqueue(thread, place);
         }
     }
 
-    fn highest(&self, partition: usize) -> Option<(u8, usize)> {
-        let p = &self.partitions[partition];
+    fn highest(&self, cpu: usize, partition: usize) -> Option<(u8, usize)> {
+        let p = &self.partitions[cpu][partition];
         for word in (0..p.bitmap.len()).rev() {
             if p.bitmap[word] != 0 {
                 let priority = word * 64 + 63 - p.bitmap[word].leading_zeros() as usize;
@@ -123,12 +144,13 @@ impl<const THREADS: usize> RunQueues<THREADS> {
         None
     }
 
-    /// The thread to run: the highest priority among time partition 0 and `active`.
-    pub fn choose(&self, active: Option<u8>) -> Option<usize> {
-        let background = self.highest(0);
+    /// The thread to run on `cpu`: the highest priority among its threads of time
+    /// partition 0 and `active`.
+    pub fn choose(&self, cpu: usize, active: Option<u8>) -> Option<usize> {
+        let background = self.highest(cpu, 0);
         let foreground = active
             .filter(|&a| a != 0)
-            .and_then(|a| self.highest(a as usize));
+            .and_then(|a| self.highest(cpu, a as usize));
         match (foreground, background) {
             (Some((fp, ft)), Some((bp, _))) if fp >= bp => Some(ft),
             (_, Some((_, bt))) => Some(bt),

@@ -12,7 +12,7 @@
 use crate::mem::PAGE_SIZE;
 use crate::mem::paging::is_user_range;
 use crate::rp::ResourcePartition;
-use crate::sched::{RunQueues, TIME_PARTITIONS};
+use crate::sched::{CPUS, RunQueues, TIME_PARTITIONS};
 use crate::table::{RpIdx, Slot, Table, TaskIdx, ThreadIdx};
 use crate::task::Task;
 use crate::thread::{NEVER, Thread};
@@ -60,10 +60,13 @@ pub struct Kernel {
     pub(crate) tasks: Table<TaskIdx, Task, MAX_TASKS>,
     pub(crate) rps: Table<RpIdx, ResourcePartition, MAX_RPS>,
     pub(crate) run: RunQueues<MAX_THREADS>,
-    /// The thread whose registers and FPU state are loaded (or were, before idling).
-    pub(crate) current: Option<ThreadIdx>,
-    /// The active window's time partition (none until a schedule exists).
-    pub(crate) active_partition: Option<u8>,
+    /// What each CPU runs and where its schedule stands; `cpu` names the one whose entry
+    /// holds the lock ([`Kernel::core`]).
+    pub(crate) cores: [Core; CPUS],
+    /// The CPU that entered the kernel (set whenever the lock is taken).
+    pub(crate) cpu: usize,
+    /// CPUs online (the boot CPU and the application processors that came up).
+    pub(crate) online: usize,
     /// The root task's health monitor ([`ThreadId::OWN`] = none).
     pub(crate) health_monitor: ThreadId,
     /// Physical memory the root task may map.
@@ -71,26 +74,56 @@ pub struct Kernel {
     pub(crate) user_memory_count: usize,
     /// Earliest deadline of any blocked thread (maybe stale-early after a wake-up).
     pub(crate) next_deadline: u64,
-    /// Set when `next_deadline` moved earlier and the timer must be reprogrammed.
-    pub(crate) timer_dirty: bool,
-    /// The running thread's FS/GS base changed and must be reloaded on exit.
-    pub(crate) reload_bases: bool,
     /// Schedules of time windows.
     pub(crate) time: TimeTable,
-    /// Absolute time of the next window boundary (`NEVER` without a schedule).
-    pub(crate) next_boundary: u64,
-    /// CPU time per time partition and time with nothing to run, in TSC ticks.
+    /// CPU time per time partition and time with nothing to run (all CPUs), in TSC ticks.
     pub(crate) cpu_ticks: [u64; TIME_PARTITIONS],
     pub(crate) idle_ticks: u64,
-    /// Time partition of the thread that ran since `last_account` (None: idle).
-    pub(crate) running_partition: Option<u8>,
-    pub(crate) last_account: u64,
-    /// The task whose I/O bitmap is in the TSS ([`TaskId::OWN`]: ports disabled).
-    pub(crate) io_loaded: TaskId,
     /// Interrupt lines attached to threads.
     pub(crate) irqs: crate::irq::Irqs,
     /// The IOMMU, when the machine has one the kernel programs (translation on).
     pub(crate) dma: Option<Dma>,
+}
+
+/// One CPU's part of the kernel state.
+#[derive(Clone, Copy, Debug)]
+pub struct Core {
+    /// The thread whose FPU state the CPU's registers hold: the one it runs or ran until
+    /// this kernel entry (None while it idles); its slot is not reused while it is
+    /// ([`Kernel::free_thread_slot`]).
+    pub current: Option<ThreadIdx>,
+    /// The thread the CPU runs (None: it idles).
+    pub running: Option<ThreadIdx>,
+    /// Its active window's time partition (none until a schedule exists).
+    pub active_partition: Option<u8>,
+    /// Absolute time of its next window boundary (`NEVER` without a schedule).
+    pub next_boundary: u64,
+    /// Its timer must be programmed again before it runs on.
+    pub timer_dirty: bool,
+    /// Its running thread's FS/GS base changed and must be reloaded.
+    pub reload_bases: bool,
+    /// Time partition of the thread that ran since `last_account` (None: idle).
+    pub running_partition: Option<u8>,
+    pub last_account: u64,
+    /// The task whose I/O bitmap is in its TSS ([`TaskId::OWN`]: ports disabled).
+    pub io_loaded: TaskId,
+    /// An interrupt was sent to make it look at its state again, not taken yet.
+    pub kicked: bool,
+}
+
+impl Core {
+    pub const IDLE: Core = Core {
+        current: None,
+        running: None,
+        active_partition: None,
+        next_boundary: NEVER,
+        timer_dirty: false,
+        reload_bases: false,
+        running_partition: None,
+        last_account: 0,
+        io_loaded: TaskId::OWN,
+        kicked: false,
+    };
 }
 
 /// Functions a remapping unit's device scopes may name (more count as not covered).
@@ -124,29 +157,57 @@ impl Kernel {
             tasks: Table::new([Task::FREE; MAX_TASKS]),
             rps: Table::new([ResourcePartition::FREE; MAX_RPS]),
             run: RunQueues::new(),
-            current: None,
-            active_partition: None,
+            cores: [Core::IDLE; CPUS],
+            cpu: 0,
+            online: 1,
             health_monitor: ThreadId::OWN,
             user_memory: [PhysRegion { start: 0, pages: 0 }; ROOT_INFO_MAX_REGIONS],
             user_memory_count: 0,
             next_deadline: NEVER,
-            timer_dirty: false,
-            reload_bases: false,
             time: TimeTable::new(),
-            next_boundary: NEVER,
             cpu_ticks: [0; TIME_PARTITIONS],
             idle_ticks: 0,
-            running_partition: None,
-            last_account: 0,
-            io_loaded: TaskId::OWN,
             irqs: crate::irq::Irqs::new(),
             dma: None,
         }
     }
 
-    /// The thread to run next.
+    /// The state of the CPU that entered the kernel.
+    pub fn core(&self) -> &Core {
+        &self.cores[self.cpu]
+    }
+
+    pub fn core_mut(&mut self) -> &mut Core {
+        &mut self.cores[self.cpu]
+    }
+
+    /// The thread to run next on `cpu`.
+    pub fn choose_on(&self, cpu: usize) -> Option<ThreadIdx> {
+        let active = self.cores[cpu].active_partition;
+        self.run.choose(cpu, active).map(ThreadIdx::at)
+    }
+
+    /// The thread to run next on the CPU that entered the kernel.
     pub fn choose(&self) -> Option<ThreadIdx> {
-        self.run.choose(self.active_partition).map(ThreadIdx::at)
+        self.choose_on(self.cpu)
+    }
+
+    /// The other CPUs that must look at their state again: the thread they should run is
+    /// not the one they run, or their timer or running thread's bases changed. Each is
+    /// marked kicked (it clears the mark when it enters the kernel), so an interrupt is
+    /// sent to it once.
+    pub fn cpus_to_kick(&mut self) -> u64 {
+        let mut kick = 0;
+        for cpu in (0..self.online).filter(|&c| c != self.cpu) {
+            let chosen = self.choose_on(cpu);
+            let core = &mut self.cores[cpu];
+            let stale = chosen != core.running || core.timer_dirty || core.reload_bases;
+            if stale && !core.kicked {
+                core.kicked = true;
+                kick |= 1 << cpu;
+            }
+        }
+        kick
     }
 
     /// True if the physical range was handed to the root task at boot.
@@ -229,6 +290,7 @@ impl Kernel {
         for i in 0..pages {
             self.tasks[target].unmap_page(address + i * PAGE_SIZE);
         }
+        crate::arch::smp::release_space(self.tasks[target].space().root(), false);
         Ok(())
     }
 
@@ -252,6 +314,7 @@ impl Kernel {
         for i in 0..pages {
             self.tasks[target].set_page_rights(address + i * PAGE_SIZE, rights);
         }
+        crate::arch::smp::release_space(self.tasks[target].space().root(), false);
         Ok(())
     }
 }

@@ -653,9 +653,10 @@ fn schedule_set(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled 
             offset: spec.offset,
             duration: spec.duration,
             partition: u8::try_from(spec.partition).map_err(|_| Error::InvalidArgument)?,
+            cpu: u8::try_from(spec.cpu).map_err(|_| Error::InvalidArgument)?,
         };
     }
-    let schedule = Schedule::new(a.major_frame, &windows[..a.count as usize])
+    let schedule = Schedule::new(a.major_frame, &windows[..a.count as usize], k.online)
         .map_err(|_| Error::InvalidArgument)?;
     k.time
         .install(a.slot as usize, schedule)
@@ -671,7 +672,9 @@ fn schedule_switch(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, clock: Clock) -> H
         .then(|| k.time.switch_to(slot as usize, now))
         .flatten()
         .ok_or(Error::InvalidArgument)?;
-    k.update_window(now);
+    for cpu in 0..k.online {
+        k.update_window(cpu, now);
+    }
     k.threads[t].set_results(|r| results::ScheduleSwitch { at }.encode_into(r));
     Ok(Next::Return)
 }
@@ -690,7 +693,7 @@ fn partition_info(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, clock: Clock) -> Ha
         k.time.frames,
     );
     let info = results::PartitionInfo {
-        active: k.active_partition.unwrap_or(0) as u64,
+        active: k.core().active_partition.unwrap_or(0) as u64,
         window_start: start,
         window_length: length,
         cpu_ns: cpu,
@@ -788,7 +791,9 @@ fn set_attribute(
             }
             let fs = attribute == ThreadAttribute::FsBase as u64;
             k.threads[target].set_base(fs, value);
-            k.reload_bases |= k.current == Some(target);
+            for core in k.cores.iter_mut().filter(|c| c.current == Some(target)) {
+                core.reload_bases = true;
+            }
             Ok(())
         }
         ThreadAttribute::SyscallAnswer => {
@@ -801,6 +806,10 @@ fn set_attribute(
                 target,
                 u8::try_from(value).map_err(|_| Error::InvalidArgument)?,
             )
+        }
+        ThreadAttribute::Cpu => {
+            k.require(caller_task, Abilities::SCHEDULING)?;
+            k.set_cpu(target, value)
         }
     }
 }

@@ -509,6 +509,8 @@ impl Kernel {
         }
         let mut entries = budget / ENTRY_COST;
         for slot in TaskIdx::all().filter(|&t| member(t)) {
+            // No other CPU may walk the tables while they are freed.
+            crate::arch::smp::release_space(self.tasks[slot].space.root(), true);
             let freed = self.tasks[slot].space.destroy_some(&mut entries);
             self.release_pages(slot, freed);
             if !self.tasks[slot].space.is_destroyed() {

@@ -92,6 +92,8 @@ pub struct Thread {
     task: TaskIdx,
     priority: u8,
     time_partition: u8,
+    /// The CPU it runs on.
+    cpu: u8,
     suspended: bool,
     /// User registers while the thread is not running (the live copy is the entry frame).
     context: TrapFrame,
@@ -120,6 +122,7 @@ impl Thread {
         task: TaskIdx::ROOT,
         priority: 0,
         time_partition: 0,
+        cpu: 0,
         suspended: false,
         context: TrapFrame::ZERO,
         fs_base: 0,
@@ -162,6 +165,11 @@ impl Thread {
     #[inline(always)]
     pub fn time_partition(&self) -> u8 {
         self.time_partition
+    }
+
+    #[inline(always)]
+    pub fn cpu(&self) -> usize {
+        self.cpu as usize
     }
 
     /// Its user registers as saved when it left user mode.
@@ -333,6 +341,12 @@ impl Thread {
         ArgRegs::from_array([c.rdi, c.rsi, c.rdx, c.r10, c.r8, c.r9])
     }
 
+    /// Makes its `syscall`, which it entered but did not make, run again when it resumes
+    /// (the instruction is two bytes long; every register is as it entered).
+    pub fn restart_syscall(&mut self) {
+        self.context.rip = self.context.rip.wrapping_sub(2);
+    }
+
     /// Writes a call's results into its argument registers: `encode` (an `abi::args::results`
     /// struct's `encode_into`) sets those the results use, the others keep their values.
     #[inline(always)]
@@ -384,8 +398,12 @@ impl Kernel {
     fn requeue(&mut self, t: ThreadIdx) {
         let th = &self.threads[t];
         if th.is_runnable() {
-            self.run
-                .enqueue(t.position(), th.priority, th.time_partition);
+            let place = crate::sched::Place {
+                priority: th.priority,
+                partition: th.time_partition,
+                cpu: th.cpu,
+            };
+            self.run.enqueue(t.position(), place);
         } else {
             self.run.remove(t.position());
         }
@@ -413,13 +431,14 @@ impl Kernel {
         self.threads[t].deadline = deadline;
         if deadline < self.next_deadline {
             self.next_deadline = deadline;
-            self.timer_dirty = true;
+            // The boot CPU's timer serves the time-outs (`Kernel::next_event`).
+            self.cores[0].timer_dirty = true;
         }
         self.set_state(t, state);
     }
 
     /// A new inactive thread of `task` that will start at `entry` with `rsp` = `stack` and
-    /// `rdi` = `arg`.
+    /// `rdi` = `arg`, on the CPU that entered the kernel (its creator's).
     pub fn create_thread(
         &mut self,
         task: TaskIdx,
@@ -435,10 +454,7 @@ impl Kernel {
         if entry >= USER_END || stack > USER_END || time_partition as usize >= TIME_PARTITIONS {
             return Err(Error::InvalidArgument);
         }
-        let slot = self
-            .threads
-            .find(|t| t.is_free())
-            .ok_or(Error::QuotaExceeded)?;
+        let slot = self.free_thread_slot().ok_or(Error::QuotaExceeded)?;
         self.rps[self.tasks[task].rp()].charge(Amount::threads(1))?;
         let generation = self.threads[slot].generation;
         self.threads[slot] = Thread {
@@ -447,6 +463,7 @@ impl Kernel {
             task,
             priority,
             time_partition,
+            cpu: self.cpu as u8,
             context: TrapFrame {
                 rip: entry,
                 rsp: stack,
@@ -503,8 +520,10 @@ impl Kernel {
         if self.health_monitor == id {
             self.health_monitor = ThreadId::OWN;
         }
-        if self.current == Some(t) {
-            self.current = None;
+        // Another CPU running it is sent an interrupt (`Kernel::cpus_to_kick`); until it
+        // takes it, the slot stays its `current` and is not reused.
+        if self.core().current == Some(t) {
+            self.core_mut().current = None;
         }
         let rp = self.tasks[self.threads[t].task].rp();
         self.rps[rp].release(Amount::threads(1));
@@ -526,6 +545,32 @@ impl Kernel {
         }
         self.run.remove(t.position());
         self.threads[t].priority = priority;
+        self.requeue(t);
+        Ok(())
+    }
+
+    /// A free thread slot no CPU still holds as its current thread (a thread killed while
+    /// another CPU ran it: that CPU saves its registers there when it takes its interrupt).
+    pub fn free_thread_slot(&self) -> Option<ThreadIdx> {
+        ThreadIdx::all()
+            .find(|&t| self.threads[t].is_free() && self.cores.iter().all(|c| c.current != Some(t)))
+    }
+
+    /// Moves `t` to `cpu` (an online one), unless another CPU runs it: two CPUs must never
+    /// run one thread, and only the CPU running it has its FPU state (a CPU saves it
+    /// when it switches away or idles). The caller's own thread may move: its CPU saves
+    /// its state before it lets go of the kernel lock.
+    pub fn set_cpu(&mut self, t: ThreadIdx, cpu: u64) -> Result<(), Error> {
+        if cpu >= self.online as u64 {
+            return Err(Error::InvalidArgument);
+        }
+        let elsewhere =
+            |(c, core): (usize, &crate::state::Core)| c != self.cpu && core.current == Some(t);
+        if self.cores.iter().enumerate().any(elsewhere) {
+            return Err(Error::NotPermitted);
+        }
+        self.run.remove(t.position());
+        self.threads[t].cpu = cpu as u8;
         self.requeue(t);
         Ok(())
     }
@@ -556,7 +601,7 @@ impl Kernel {
             }
         }
         self.next_deadline = next;
-        self.timer_dirty = true;
+        self.cores[0].timer_dirty = true;
     }
 
     /// Ends whatever `t` waits for with `error` (timeout or peer gone).

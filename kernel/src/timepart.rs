@@ -1,13 +1,16 @@
 //! ARINC 653 time partitioning: schedules of windows in a major frame.
 //!
 //! A schedule is a major frame (ns) and up to [`MAX_WINDOWS`] windows, each an offset and
-//! duration inside the frame that belongs to one time partition (1..[`TIME_PARTITIONS`]).
+//! duration inside the frame on one CPU that belongs to one time partition
+//! (1..[`TIME_PARTITIONS`]). Every CPU has its own windows in the one frame, which starts
+//! at the same instant on all of them; the windows of one CPU are disjoint, those of
+//! different CPUs may overlap.
 //! Time partition 0 is the background: it never owns a window and is always eligible. The
 //! root task installs up to [`MAX_SCHEDULES`] schedules; the first one installed starts at
 //! once, a switch to another takes effect at the next major-frame boundary, never mid-frame.
 //!
-//! [`TimeTable::advance`] is the whole decision: given the time, which partition's window is
-//! active and when the next boundary is. It is pure and host-tested against a model.
+//! [`TimeTable::advance`] is the whole decision: given the time and a CPU, which
+//! partition's window is active there and when its next boundary is. It is pure and host-tested against a model.
 
 use crate::sched::TIME_PARTITIONS;
 use crate::state::Kernel;
@@ -21,6 +24,7 @@ pub struct Window {
     pub offset: u64,
     pub duration: u64,
     pub partition: u8,
+    pub cpu: u8,
 }
 
 impl Window {
@@ -42,29 +46,37 @@ pub enum ScheduleError {
     /// Too short or too long a major frame (`MIN_WINDOW..=MAX_MAJOR_FRAME`), a window shorter
     /// than `MIN_WINDOW`, or too many windows.
     Empty,
-    /// A window starts before the previous one ends (they must be sorted, disjoint).
+    /// A window starts before the previous one of its CPU ends (they must be sorted,
+    /// disjoint).
     Overlap(usize),
     /// A window ends after the major frame.
     BeyondFrame(usize),
     /// A window for partition 0 (background) or an unknown partition.
     BadPartition(usize),
+    /// A window on a CPU that is not online.
+    BadCpu(usize),
 }
 
 impl Schedule {
-    pub fn new(major_frame: u64, windows: &[Window]) -> Result<Self, ScheduleError> {
+    /// Checks `windows` for a machine of `cpus` CPUs.
+    pub fn new(major_frame: u64, windows: &[Window], cpus: usize) -> Result<Self, ScheduleError> {
         let frame_ok = (MIN_WINDOW..=abi::syscall::MAX_MAJOR_FRAME).contains(&major_frame);
         if !frame_ok || windows.len() > MAX_WINDOWS {
             return Err(ScheduleError::Empty);
         }
-        let mut previous_end = 0;
+        let mut previous_end = [0; crate::sched::CPUS];
         for (i, w) in windows.iter().enumerate() {
+            if w.cpu as usize >= cpus.min(crate::sched::CPUS) {
+                return Err(ScheduleError::BadCpu(i));
+            }
+            let previous_end = &mut previous_end[w.cpu as usize];
             if w.duration < MIN_WINDOW {
                 return Err(ScheduleError::Empty);
             }
             if w.partition == 0 || w.partition as usize >= TIME_PARTITIONS {
                 return Err(ScheduleError::BadPartition(i));
             }
-            if w.offset < previous_end {
+            if w.offset < *previous_end {
                 return Err(ScheduleError::Overlap(i));
             }
             if w.offset
@@ -73,7 +85,7 @@ impl Schedule {
             {
                 return Err(ScheduleError::BeyondFrame(i));
             }
-            previous_end = w.end();
+            *previous_end = w.end();
         }
         let mut s = Self {
             major_frame,
@@ -88,10 +100,12 @@ impl Schedule {
         &self.windows[..self.count]
     }
 
-    /// The window containing frame position `pos` (if any) and the next boundary after
-    /// `pos` (a window start or end, or the frame end), relative to the frame start.
-    fn at(&self, pos: u64) -> (Option<usize>, u64) {
-        for (i, w) in self.windows().iter().enumerate() {
+    /// The window of `cpu` containing frame position `pos` (if any) and the next boundary
+    /// of `cpu` after `pos` (a window start or end, or the frame end), relative to the
+    /// frame start.
+    fn at(&self, pos: u64, cpu: usize) -> (Option<usize>, u64) {
+        let on_cpu = |(_, w): &(usize, &Window)| w.cpu as usize == cpu;
+        for (i, w) in self.windows().iter().enumerate().filter(on_cpu) {
             if pos < w.offset {
                 return (None, w.offset);
             }
@@ -167,7 +181,7 @@ impl TimeTable {
             self.frames = 1;
             return Some(now);
         };
-        self.advance(now);
+        self.advance(now, 0);
         self.pending = Some(slot);
         let major = self.schedules[running].map_or(0, |s| s.major_frame);
         Some(self.frame_start + major)
@@ -181,8 +195,8 @@ impl TimeTable {
         self.schedules.get(slot)?.as_ref()
     }
 
-    /// Moves to time `now` (never backwards) and reports the position.
-    pub fn advance(&mut self, now: u64) -> Position {
+    /// Moves to time `now` (never backwards) and reports the position of `cpu`.
+    pub fn advance(&mut self, now: u64, cpu: usize) -> Position {
         let Some(mut slot) = self.running else {
             return Position {
                 partition: None,
@@ -209,7 +223,7 @@ impl TimeTable {
             }
         }
         let schedule = self.schedules[slot].as_ref().expect("running");
-        let (window, next) = schedule.at(now - self.frame_start);
+        let (window, next) = schedule.at(now - self.frame_start, cpu);
         Position {
             partition: window.map(|w| schedule.windows[w].partition),
             window,
@@ -218,8 +232,9 @@ impl TimeTable {
         }
     }
 
-    /// Next activation (absolute start) and length of a window of `partition` at or after
-    /// `now`, within the running schedule (current window included if it is active now).
+    /// Next activation (absolute start) and length of a window of `partition` (on any CPU)
+    /// at or after `now`, within the running schedule (current window included if it is
+    /// active now).
     pub fn next_window(&self, partition: u8, now: u64) -> Option<(u64, u64)> {
         let schedule = self.schedules[self.running?].as_ref()?;
         // The table is advanced on every timer event, so `now` is in this frame or the next.
@@ -240,33 +255,41 @@ impl Kernel {
     pub fn on_timer(&mut self, now: u64) {
         // The one-shot timer has fired: re-arm it even if it fired a little early (its
         // count is rounded down) and nothing is due yet, or the next event would be missed.
-        self.timer_dirty = true;
+        self.core_mut().timer_dirty = true;
         if now >= self.next_deadline {
             self.expire_timeouts(now);
         }
-        if now >= self.next_boundary {
-            self.update_window(now);
+        if now >= self.core().next_boundary {
+            self.update_window(self.cpu, now);
         }
     }
 
-    /// Recomputes the active window (after a boundary or a schedule change).
-    pub fn update_window(&mut self, now: u64) {
-        let position = self.time.advance(now);
-        self.active_partition = position.partition;
-        self.next_boundary = position.next_boundary;
-        self.timer_dirty = true;
+    /// Recomputes the active window of `cpu` (after a boundary or a schedule change).
+    pub fn update_window(&mut self, cpu: usize, now: u64) {
+        let position = self.time.advance(now, cpu);
+        let core = &mut self.cores[cpu];
+        core.active_partition = position.partition;
+        core.next_boundary = position.next_boundary;
+        core.timer_dirty = true;
     }
 
-    /// When the timer must fire next.
+    /// When the entering CPU's timer must fire next: its next window boundary, and on the
+    /// boot CPU, which serves every time-out, the earliest time-out too.
     pub fn next_event(&self) -> u64 {
-        self.next_deadline.min(self.next_boundary)
+        let boundary = self.core().next_boundary;
+        match self.cpu {
+            0 => self.next_deadline.min(boundary),
+            _ => boundary,
+        }
     }
 
-    /// Charges the time since the last call (TSC `now`) to the partition that ran, or idle.
+    /// Charges the entering CPU's time since its last call (TSC `now`) to the partition
+    /// that ran there, or idle.
     pub fn account(&mut self, now: u64) {
-        let delta = now.saturating_sub(self.last_account);
-        self.last_account = now;
-        match self.running_partition {
+        let core = self.core_mut();
+        let delta = now.saturating_sub(core.last_account);
+        core.last_account = now;
+        match core.running_partition {
             Some(p) => self.cpu_ticks[p as usize] += delta,
             None => self.idle_ticks += delta,
         }

@@ -118,7 +118,7 @@ codes::code_enum! {
         /// `thread_create(task, entry, stack, priority, arg) -> rdi = thread`: a new thread of
         /// `task` (0 = own task; else a descendant), inactive until `thread_start`; it will
         /// start at `entry` with `rsp` = `stack`, `rdi` = `arg`, in the creator's time
-        /// partition, without an exception handler. Costs one thread of the quota of the
+        /// partition and on the creator's CPU, without an exception handler. Costs one thread of the quota of the
         /// task's resource partition. Ability: `CREATE_THREAD`. Errors: `McpExceeded`
         /// (priority above the task's MCP), `NoSuchObject`, `NotPermitted`, `QuotaExceeded`,
         /// `InvalidArgument` (entry or stack outside user space).
@@ -246,22 +246,25 @@ codes::code_enum! {
         /// `schedule_set(slot, major_frame, windows, count)`: stores time schedule `slot`
         /// (< [`MAX_SCHEDULES`]): a major frame in ns ([`MIN_WINDOW`]..=[`MAX_MAJOR_FRAME`]) and `count`
         /// (<= [`MAX_WINDOWS`])
-        /// [`WindowSpec`]s at user address `windows`, sorted by offset, disjoint, inside the
-        /// frame, each at least [`MIN_WINDOW`] long and for a time partition 1..[`TIME_PARTITIONS`] (0 is the background and has
-        /// no windows). The running or pending schedule cannot be replaced. Ability:
-        /// `SCHEDULING`. Errors: `InvalidArgument` (slot, frame, windows), `BadAddress`,
-        /// `NotPermitted` (slot in use).
+        /// [`WindowSpec`]s at user address `windows`, each on an online CPU, sorted by offset
+        /// and disjoint among the windows of their CPU (the CPUs' windows may overlap each
+        /// other: every CPU has its own schedule in the one major frame), inside the frame,
+        /// each at least [`MIN_WINDOW`] long and for a time partition 1..[`TIME_PARTITIONS`]
+        /// (0 is the background and has no windows). The running or pending schedule cannot
+        /// be replaced. Ability: `SCHEDULING`. Errors: `InvalidArgument` (slot, frame,
+        /// windows, a CPU not online), `BadAddress`, `NotPermitted` (slot in use).
         ScheduleSet = 70 => "schedule_set",
         /// `schedule_switch(slot) -> rdi = when it takes effect (ns since boot)`: runs
         /// schedule `slot`; the first schedule starts at once, later switches take effect at
-        /// the next major-frame boundary of the running schedule (a later switch before it
-        /// replaces the earlier one). Ability: `SCHEDULING`. Errors: `InvalidArgument`
+        /// the next major-frame boundary of the running schedule, on every CPU at once (a
+        /// later switch before it replaces the earlier one). Ability: `SCHEDULING`. Errors: `InvalidArgument`
         /// (empty slot).
         ScheduleSwitch = 71 => "schedule_switch",
-        /// `partition_info(tp) -> rdi = active time partition (0 in a gap or without a
-        /// schedule), rsi = start of tp's current or next window (ns since boot; u64::MAX if it
-        /// has none), rdx = that window's length (ns), r10 = CPU time threads of tp used (ns),
-        /// r8 = time the CPU was idle (ns), r9 = major frames started`. Ability: none. Errors:
+        /// `partition_info(tp) -> rdi = active time partition of the caller's CPU (0 in a
+        /// gap or without a schedule), rsi = start of tp's current or next window on any CPU
+        /// (ns since boot; u64::MAX if it has none), rdx = that window's length
+        /// (ns), r10 = CPU time threads of tp used on all CPUs (ns), r8 = time the CPUs were
+        /// idle, summed (ns), r9 = major frames started`. Ability: none. Errors:
         /// `InvalidArgument` (tp out of range).
         PartitionInfo = 72 => "partition_info",
 
@@ -374,11 +377,13 @@ pub struct WindowSpec {
     pub duration: u64,
     /// Time partition 1..TIME_PARTITIONS.
     pub partition: u64,
+    /// The CPU whose schedule the window is in (0 = the boot CPU).
+    pub cpu: u64,
 }
 
 impl WindowSpec {
-    /// Its size in user memory (three `u64`, no padding).
-    pub const SIZE: usize = 24;
+    /// Its size in user memory (four `u64`, no padding).
+    pub const SIZE: usize = 32;
 
     /// The spec as it lies in user memory (native byte order, as `repr(C)` lays it out).
     pub fn from_bytes(raw: &[u8; Self::SIZE]) -> Self {
@@ -387,6 +392,7 @@ impl WindowSpec {
             offset: word(0),
             duration: word(1),
             partition: word(2),
+            cpu: word(3),
         }
     }
 }
@@ -415,6 +421,12 @@ codes::code_enum! {
         /// guest's Linux `getpid`. Value: [`syscall_answer`]`(number, result)`, 0 = none;
         /// one number per thread.
         SyscallAnswer = 7 => "syscall_answer",
+        /// The CPU the thread runs on: an online one (0 = the boot CPU; else
+        /// `InvalidArgument`). It moves at once, unless another CPU is running it
+        /// (`NotPermitted`: set it while it waits, or from its own CPU). A new thread runs
+        /// on its creator's CPU. Its time partition's windows are those of this CPU's
+        /// schedule; the background runs on every CPU. Needs `SCHEDULING`.
+        Cpu = 8 => "cpu",
     }
 }
 
@@ -568,11 +580,11 @@ mod tests {
     fn a_window_spec_decodes_from_its_memory_layout() {
         assert_eq!(core::mem::size_of::<WindowSpec>(), WindowSpec::SIZE);
         let mut raw = [0u8; WindowSpec::SIZE];
-        for (n, v) in [7u64, 8, 9].iter().enumerate() {
+        for (n, v) in [7u64, 8, 9, 1].iter().enumerate() {
             raw[n * 8..n * 8 + 8].copy_from_slice(&v.to_ne_bytes());
         }
         let w = WindowSpec::from_bytes(&raw);
-        assert_eq!((w.offset, w.duration, w.partition), (7, 8, 9));
+        assert_eq!((w.offset, w.duration, w.partition, w.cpu), (7, 8, 9, 1));
     }
 
     #[test]

@@ -15,6 +15,13 @@
 //! With nothing to run the CPU halts with interrupts enabled *inside* the exit path; an
 //! interrupt then arrives in ring 0 on the kernel stack, updates the kernel state and
 //! returns to the halt loop, which looks again.
+//!
+//! Every CPU runs this path; the kernel's objects are behind one lock ([`KERNEL`], taken
+//! once per entry, interrupts off, every path under it bounded). Before it lets go, the
+//! CPU sends an interrupt ([`idt::RESCHEDULE_VECTOR`](super::idt::RESCHEDULE_VECTOR)) to
+//! each other CPU whose state it changed (`Kernel::cpus_to_kick`), and one waiting for the
+//! lock answers address-space requests meanwhile (`smp::serve_space_request`), since the
+//! holder may be waiting for that answer.
 
 use super::idt::TrapFrame;
 use crate::state::Kernel;
@@ -24,8 +31,9 @@ use crate::{fault, qemu, time};
 use core::arch::naked_asm;
 use core::sync::atomic::{AtomicBool, Ordering};
 use spin::{Mutex, MutexGuard};
+use x86_64::structures::tss::TaskStateSegment;
 
-/// The kernel's objects. Locked once per entry; never held while halting.
+/// The kernel's objects. Locked once per entry ([`lock_kernel`]); never held while halting.
 pub static KERNEL: Mutex<Kernel> = Mutex::new(Kernel::new());
 
 /// Size of the user frame at the top of the kernel stack.
@@ -39,6 +47,10 @@ static RUNNING: AtomicBool = AtomicBool::new(false);
 pub(super) struct CpuEntry {
     /// This block's address (what `gs:[0]` gives the portable code).
     this: u64,
+    /// The CPU's number (0: the boot CPU).
+    number: u64,
+    /// Its TSS, whose ring-0 stack pointer follows the active frame.
+    tss: u64,
     /// A `syscall`'s user stack pointer, until the frame holds it.
     user_rsp: u64,
     /// The running thread's saved context: where the stubs save a user frame and what
@@ -51,6 +63,8 @@ pub(super) struct CpuEntry {
 static mut CPU_ENTRIES: [CpuEntry; abi::machine::MAX_CPUS] = [const {
     CpuEntry {
         this: 0,
+        number: 0,
+        tss: 0,
         user_rsp: 0,
         active_frame: 0,
         stack_top: 0,
@@ -59,35 +73,65 @@ static mut CPU_ENTRIES: [CpuEntry; abi::machine::MAX_CPUS] = [const {
 
 const IA32_GS_BASE: u32 = 0xc000_0101;
 
-/// Makes entry block `cpu` this CPU's (its GS base), with its kernel stack's top.
-pub(super) fn init_cpu(cpu: usize, stack_top: u64) {
+/// Makes entry block `cpu` this CPU's (its GS base), with its kernel stack's top and TSS.
+pub(super) fn init_cpu(cpu: usize, stack_top: u64, tss: *mut TaskStateSegment) {
     // SAFETY: only the address of the block is taken.
     let block = unsafe { &raw mut CPU_ENTRIES[cpu] };
     // SAFETY: each CPU initialises its own block, once, before its first user entry; no
     // other reference to it exists.
     let block = unsafe { &mut *block };
     (block.this, block.stack_top) = (block as *mut CpuEntry as u64, stack_top);
+    (block.number, block.tss) = (cpu as u64, tss as u64);
     // SAFETY: the kernel uses GS for nothing but this block.
     unsafe { x86_64::registers::model_specific::Msr::new(IA32_GS_BASE).write(block.this) };
 }
 
+/// This CPU's entry block.
+fn this_block() -> *mut CpuEntry {
+    let block: u64;
+    // SAFETY: in kernel mode GS's base is this CPU's block (`init_cpu`), whose first word
+    // is its address.
+    unsafe {
+        core::arch::asm!("mov {}, gs:[0]", out(reg) block, options(nostack, preserves_flags, readonly))
+    };
+    block as *mut CpuEntry
+}
+
+/// The number of the CPU this runs on (0: the boot CPU).
+pub fn this_cpu() -> usize {
+    // SAFETY: this CPU's block, set up before its first kernel entry; `number` never
+    // changes after.
+    unsafe { (*this_block()).number as usize }
+}
+
 /// Makes `context` (a thread's, in the kernel's thread table, which never moves) the frame
-/// the next user entry on this CPU saves into and the next exit restores.
+/// the next user entry on this CPU saves into and the next exit restores; the CPU puts an
+/// interrupt's frame just past it (its TSS's ring-0 stack).
 fn activate_frame(context: *mut TrapFrame) {
     let at = context as u64;
-    // SAFETY: in kernel mode GS's base is this CPU's block (`init_cpu`), whose first word
-    // is its address; only this CPU, with interrupts off, and its stubs use the block.
-    unsafe {
-        core::arch::asm!(
-            "mov {block}, gs:[0]",
-            "mov [{block} + {active}], {at}",
-            block = out(reg) _,
-            active = const core::mem::offset_of!(CpuEntry, active_frame),
-            at = in(reg) at,
-            options(nostack, preserves_flags),
-        );
-    }
-    super::gdt::set_user_entry_stack(at + FRAME_SIZE as u64);
+    // SAFETY: only this CPU, with interrupts off, and its stubs use its block.
+    let block = unsafe { &mut *this_block() };
+    block.active_frame = at;
+    let tss = block.tss as *mut TaskStateSegment;
+    let top = x86_64::VirtAddr::new_truncate(at + FRAME_SIZE as u64);
+    // SAFETY: this CPU's TSS, which the CPU reads only on entries from ring 3, never while
+    // the kernel runs.
+    unsafe { (*tss).privilege_stack_table[0] = top };
+}
+
+/// Takes the kernel's lock for this CPU, answering address-space requests while it waits
+/// (the holder may be waiting for this CPU's answer).
+fn lock_kernel() -> MutexGuard<'static, Kernel> {
+    let mut k = loop {
+        if let Some(k) = KERNEL.try_lock() {
+            break k;
+        }
+        super::smp::serve_space_request();
+        core::hint::spin_loop();
+    };
+    k.cpu = this_cpu();
+    k.core_mut().kicked = false;
+    k
 }
 
 #[unsafe(naked)]
@@ -137,9 +181,17 @@ pub(super) unsafe extern "sysv64" fn syscall_entry() {
 }
 
 extern "sysv64" fn on_syscall() {
-    let mut k = KERNEL.lock();
-    let t = k.current.expect("syscall without a current thread");
+    let mut k = lock_kernel();
     k.account(super::cpu::rdtsc());
+    let current = k.core().current;
+    let Some(t) = current.filter(|&t| k.threads[t].is_runnable()) else {
+        // Killed or suspended from another CPU while this one waited for the lock: the
+        // call is not made now; a suspended thread makes it when it resumes.
+        if let Some(t) = current.filter(|&t| !k.threads[t].is_free()) {
+            k.threads[t].restart_syscall();
+        }
+        return finish(k, Outcome::Continue);
+    };
     let outcome = crate::syscall::on_syscall(&mut k, t, time::since_boot_ns);
     finish(k, outcome);
 }
@@ -147,9 +199,12 @@ extern "sysv64" fn on_syscall() {
 /// A CPU exception in ring 3 (its frame saved in the thread's context).
 pub fn on_user_exception(vector: u64, error_code: u64) {
     let cr2 = x86_64::registers::control::Cr2::read_raw();
-    let mut k = KERNEL.lock();
-    let t = k.current.expect("user exception without a current thread");
+    let mut k = lock_kernel();
     k.account(super::cpu::rdtsc());
+    // Killed from another CPU meanwhile: nothing to report.
+    let Some(t) = k.core().current.filter(|&t| !k.threads[t].is_free()) else {
+        return finish(k, Outcome::Continue);
+    };
     let outcome = fault::on_exception(&mut k, t, vector, error_code, cr2);
     finish(k, outcome);
 }
@@ -164,6 +219,11 @@ pub fn on_line_interrupt(line: usize, from_user: bool) {
     on_interrupt(from_user, |k| k.irq_fired(line));
 }
 
+/// Another CPU changed this one's state: it chooses again and programs its timer.
+pub fn on_reschedule(from_user: bool) {
+    on_interrupt(from_user, |_| {});
+}
+
 /// An interrupt: lets `event` update the kernel (an interrupted thread's registers are
 /// already in its context), then returns to a thread chosen again (from ring 0: to the idle
 /// loop in `finish`, which chooses).
@@ -171,20 +231,30 @@ fn on_interrupt(from_user: bool, event: impl FnOnce(&mut Kernel)) {
     if !RUNNING.load(Ordering::Relaxed) {
         return;
     }
-    let mut k = KERNEL.lock();
+    let mut k = lock_kernel();
     k.account(super::cpu::rdtsc());
     event(&mut k);
     if from_user {
         finish(k, Outcome::Continue);
     } else {
         program_timer(&mut k);
+        kick_others(&mut k);
     }
 }
 
 fn program_timer(k: &mut Kernel) {
-    if k.timer_dirty {
-        k.timer_dirty = false;
+    if k.core().timer_dirty {
+        k.core_mut().timer_dirty = false;
         super::lapic::one_shot_at(k.next_event());
+    }
+}
+
+/// Interrupts the other CPUs whose state this entry changed.
+fn kick_others(k: &mut Kernel) {
+    let mut kick = k.cpus_to_kick();
+    while kick != 0 {
+        super::smp::send_reschedule(kick.trailing_zeros() as usize);
+        kick &= kick - 1;
     }
 }
 
@@ -210,7 +280,10 @@ fn finish(mut k: MutexGuard<'static, Kernel>, outcome: Outcome) {
         } else {
             qemu::ExitCode::Failure
         }),
-        Outcome::SwitchTo(next) => Some(next),
+        Outcome::SwitchTo(next) => {
+            program_timer(&mut k);
+            Some(next)
+        }
         Outcome::Continue => {
             apply_line_masks(&mut k);
             None
@@ -225,55 +298,71 @@ fn finish(mut k: MutexGuard<'static, Kernel>, outcome: Outcome) {
         }
         if let Some(next) = chosen {
             switch_to(&mut k, next);
-            k.running_partition = Some(k.threads[next].time_partition());
+            let partition = k.threads[next].time_partition();
+            let core = k.core_mut();
+            (core.running, core.running_partition) = (Some(next), Some(partition));
+            kick_others(&mut k);
             return;
         }
-        k.running_partition = None;
+        let core = k.core_mut();
+        (core.running, core.running_partition) = (None, None);
+        // An idle CPU holds no thread's state: the thread may move to another CPU (or, if
+        // another CPU killed it while this one ran it, its slot may be reused).
+        if let Some(previous) = core.current.take() {
+            super::fpu::save(k.threads[previous].fpu_save_area());
+        }
+        kick_others(&mut k);
         #[cfg(feature = "test-hooks")]
-        if k.next_event() == crate::thread::NEVER {
+        if k.cpu == 0 && k.next_event() == crate::thread::NEVER {
             crate::test_hooks::on_idle();
         }
         drop(k);
         // Enable interrupts and halt atomically (sti; hlt), so no wake-up is missed.
         x86_64::instructions::interrupts::enable_and_hlt();
         x86_64::instructions::interrupts::disable();
-        k = KERNEL.lock();
+        k = lock_kernel();
         k.account(super::cpu::rdtsc());
     }
 }
 
 fn switch_to(k: &mut Kernel, next: ThreadIdx) {
-    if k.current != Some(next) || k.reload_bases {
-        if k.current != Some(next) {
-            if let Some(previous) = k.current {
+    let current = k.core().current;
+    if current != Some(next) || k.core().reload_bases {
+        if current != Some(next) {
+            if let Some(previous) = current {
                 super::fpu::save(k.threads[previous].fpu_save_area());
             }
             super::fpu::restore(k.threads[next].fpu());
             let space = k.tasks[k.threads[next].task()].space();
             if !space.is_active() {
                 space.activate();
+                super::smp::set_loaded_space(k.cpu, space.root());
             }
-            k.current = Some(next);
+            k.core_mut().current = Some(next);
         }
-        load_io_permissions(k, k.threads[next].task());
+        if k.cpu == 0 {
+            load_io_permissions(k, k.threads[next].task());
+        }
         let (fs, gs) = k.threads[next].bases();
         super::fpu::set_bases(fs, gs);
-        k.reload_bases = false;
+        k.core_mut().reload_bases = false;
     }
     activate_frame(k.threads[next].context_ptr());
 }
 
-/// Puts `task`'s I/O bitmap into the TSS, copying 8 KiB only if another task's is there.
+/// Puts `task`'s I/O bitmap into the boot CPU's TSS (the only one with a bitmap), copying
+/// 8 KiB only if another task's is there.
 fn load_io_permissions(k: &mut Kernel, task: TaskIdx) {
     let id = k.task_id(task);
-    if k.io_loaded == id {
+    let loaded = &mut k.cores[0].io_loaded;
+    if *loaded == id {
         return;
     }
     let [lo, hi] = k.tasks[task].io_bitmap();
     if lo == 0 {
-        if k.io_loaded != abi::syscall::TaskId::OWN {
+        if *loaded != abi::syscall::TaskId::OWN {
             super::gdt::load_io_bitmap(None);
-            k.io_loaded = abi::syscall::TaskId::OWN;
+            *loaded = abi::syscall::TaskId::OWN;
         }
         return;
     }
@@ -282,14 +371,21 @@ fn load_io_permissions(k: &mut Kernel, task: TaskIdx) {
         core::slice::from_raw_parts(crate::mem::phys_to_virt(frame) as *const u8, 4096)
     };
     super::gdt::load_io_bitmap(Some([half(lo), half(hi)]));
-    k.io_loaded = id;
+    k.cores[0].io_loaded = id;
 }
 
-/// Leaves the boot path for user mode: runs the first ready thread (the root task).
+/// Leaves the boot path (of the boot CPU, which runs the root task first, or of an
+/// application processor once the boot CPU did) for user mode: runs this CPU's first
+/// ready thread, halting until there is one.
 pub fn enter_user_mode() -> ! {
-    RUNNING.store(true, Ordering::Relaxed);
-    let mut k = KERNEL.lock();
-    k.last_account = super::cpu::rdtsc();
+    if this_cpu() == 0 {
+        RUNNING.store(true, Ordering::Release);
+    }
+    while !RUNNING.load(Ordering::Acquire) {
+        core::hint::spin_loop();
+    }
+    let mut k = lock_kernel();
+    k.core_mut().last_account = super::cpu::rdtsc();
     finish(k, Outcome::Continue);
     // SAFETY: the active frame is a complete user context (chosen by `finish`); the boot
     // stack is abandoned for good.

@@ -70,12 +70,11 @@ fn init_tss() {
     tss.iomap_base = IOMAP_DISABLED;
 }
 
-/// Where the CPU puts the frame of an interrupt or exception from ring 3: just past the
-/// running thread's saved context (arch::entry).
-pub fn set_user_entry_stack(top: u64) {
-    // SAFETY: the CPU reads the TSS only on entries from ring 3, never while the kernel
-    // (interrupts off) updates it; no reference to the block lives across this write.
-    unsafe { (*tss_block()).tss.privilege_stack_table[0] = VirtAddr::new_truncate(top) };
+/// The boot CPU's TSS (the entry path points its ring-0 stack just past the running
+/// thread's saved context, `arch::entry`).
+pub fn boot_tss() -> *mut TaskStateSegment {
+    // SAFETY: only the address of the static's field is taken.
+    unsafe { &raw mut (*tss_block()).tss }
 }
 
 /// Loads the running task's I/O permission bitmap, given as its two 4 KiB halves (`None`:

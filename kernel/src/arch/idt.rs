@@ -16,8 +16,10 @@ use x86_64::structures::DescriptorTablePointer;
 
 /// Vector of the local APIC timer.
 pub const TIMER_VECTOR: u8 = 0x30;
-/// Vector of an application processor's local APIC timer (its heartbeat, `arch::smp`).
-pub const HEARTBEAT_VECTOR: u8 = 0x31;
+/// Another CPU changed this one's state (`arch::smp::send_reschedule`).
+pub const RESCHEDULE_VECTOR: u8 = 0x31;
+/// Another CPU asks this one to flush or leave an address space (`arch::smp`).
+pub const SPACE_VECTOR: u8 = 0x32;
 /// Vector the local APIC uses for spurious interrupts (must end in 0xf on old CPUs).
 pub const SPURIOUS_VECTOR: u8 = 0xff;
 
@@ -169,7 +171,8 @@ stub!(vec30, 30, error_code);
 stub!(vec31, 31);
 stub!(legacy_pic, super::pic::VECTOR_BASE);
 stub!(timer, TIMER_VECTOR);
-stub!(heartbeat, HEARTBEAT_VECTOR);
+stub!(reschedule, RESCHEDULE_VECTOR);
+stub!(space_request, SPACE_VECTOR);
 
 /// Entry stubs of the user interrupt lines (vector LINE_VECTOR_BASE + n).
 macro_rules! line_stubs {
@@ -267,7 +270,8 @@ static IDT: Lazy<Idt> = Lazy::new(|| {
         idt.0[(super::pic::VECTOR_BASE + v) as usize] = Gate::interrupt(legacy_pic, 0);
     }
     idt.0[TIMER_VECTOR as usize] = Gate::interrupt(timer, 0);
-    idt.0[HEARTBEAT_VECTOR as usize] = Gate::interrupt(heartbeat, 0);
+    idt.0[RESCHEDULE_VECTOR as usize] = Gate::interrupt(reschedule, 0);
+    idt.0[SPACE_VECTOR as usize] = Gate::interrupt(space_request, 0);
     for (line, stub) in LINE_STUBS.into_iter().enumerate() {
         idt.0[LINE_VECTOR_BASE as usize + line] = Gate::interrupt(stub, 0);
     }
@@ -306,8 +310,17 @@ extern "sysv64" fn dispatch(frame: &mut TrapFrame) {
             super::lapic::end_of_interrupt();
             super::entry::on_line_interrupt(line, from_user);
         }
-        // The AP's loop after its `hlt` counts the beat (`arch::smp`).
-        v if v == HEARTBEAT_VECTOR as u64 => super::lapic::end_of_interrupt(),
+        v if v == RESCHEDULE_VECTOR as u64 => {
+            super::lapic::end_of_interrupt();
+            super::entry::on_reschedule(from_user);
+        }
+        v if v == SPACE_VECTOR as u64 => {
+            super::lapic::end_of_interrupt();
+            // A thread whose space this CPU left is gone: choose another.
+            if super::smp::serve_space_request() && from_user {
+                super::entry::on_reschedule(true);
+            }
+        }
         // Masked legacy PIC: only spurious IRQ 7/15 can arrive; they need no EOI.
         v if v == super::pic::VECTOR_BASE as u64 => {}
         v if v == SPURIOUS_VECTOR as u64 => {}

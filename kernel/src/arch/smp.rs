@@ -1,9 +1,14 @@
 //! Application-processor (AP) bring-up: each CPU the MADT lists besides the boot CPU is
 //! started with INIT-SIPI-SIPI through a trampoline in a low page (real mode -> protected
 //! mode -> long mode), gets its own GDT, TSS, IST stacks and kernel stack from frames
-//! reserved at boot, takes on the boot CPU's control registers and page tables, and, while
-//! it waits, beats its own local APIC timer ([`heartbeat`]). Nothing is scheduled on it yet
-//! (docs/status.md).
+//! reserved at boot, takes on the boot CPU's control registers and page tables, and then
+//! runs the threads put on it in its own windows, as the boot CPU does
+//! (`entry::enter_user_mode`).
+//!
+//! Also the CPUs' messages to each other: the reschedule interrupt ([`send_reschedule`])
+//! and address-space requests ([`release_space`]): a CPU that changed or is about to free
+//! the page tables of an address space another CPU has loaded makes that CPU flush its
+//! TLB or leave the space, and waits for the answer before it goes on.
 
 use super::{gdt, idt, lapic};
 use crate::boot::{DirectMapLinks, FRAMES};
@@ -11,7 +16,7 @@ use crate::kprintln;
 use crate::mem::{PAGE_SIZE, phys_to_virt};
 use abi::boot::{MemoryKind, MemoryRegion};
 use abi::machine::Machine;
-use core::sync::atomic::{AtomicUsize, Ordering};
+use core::sync::atomic::{AtomicU8, AtomicU64, AtomicUsize, Ordering};
 use x86_64::VirtAddr;
 use x86_64::registers::control::{Cr0, Cr3, Cr4};
 use x86_64::registers::model_specific::Efer;
@@ -98,6 +103,26 @@ const BLOCK_PAGES: u64 = (core::mem::size_of::<CpuBlock>() as u64).div_ceil(PAGE
 /// CPUs that reported online, the boot CPU included.
 static ONLINE: AtomicUsize = AtomicUsize::new(1);
 
+const MAX_CPUS: usize = abi::machine::MAX_CPUS;
+
+/// Each CPU's local APIC ID, by CPU number.
+static APIC_IDS: [AtomicU8; MAX_CPUS] = [const { AtomicU8::new(0) }; MAX_CPUS];
+
+/// The root table of the address space each CPU has loaded (written by that CPU, under
+/// the kernel lock or when it leaves a space on request).
+static LOADED_SPACE: [AtomicU64; MAX_CPUS] = [const { AtomicU64::new(0) }; MAX_CPUS];
+
+/// A request to each CPU: the root table of the space to flush (low bit clear) or to leave
+/// (low bit set; roots are page-aligned); 0 once answered.
+static SPACE_REQUEST: [AtomicU64; MAX_CPUS] = [const { AtomicU64::new(0) }; MAX_CPUS];
+const LEAVE: u64 = 1;
+
+/// An IPI's command word: fixed delivery, level assert (with the vector in the low byte).
+const FIXED: u32 = 0x4000;
+
+/// The boot page tables: the kernel half only, which a CPU loads when it leaves a space.
+static KERNEL_SPACE: AtomicU64 = AtomicU64::new(0);
+
 /// The first `LOW_PAGES` page-aligned pages of usable memory between 4 KiB and 1 MiB (a
 /// SIPI vector names a page below 1 MiB; page 0 holds the real-mode vectors).
 pub fn trampoline_pages(regions: &[MemoryRegion]) -> Option<u64> {
@@ -129,6 +154,10 @@ pub fn start_application_processors(
             .iter()
             .filter(|&&a| u32::from(a) != boot_apic)
     };
+    let (pml4, _) = Cr3::read();
+    KERNEL_SPACE.store(pml4.start_address().as_u64(), Ordering::Relaxed);
+    LOADED_SPACE[0].store(pml4.start_address().as_u64(), Ordering::Relaxed);
+    APIC_IDS[0].store(boot_apic as u8, Ordering::Relaxed);
     if aps().next().is_none() {
         return 1;
     }
@@ -178,6 +207,8 @@ pub fn start_application_processors(
         put(low, 16, cpu.stack.0.as_ptr() as u64 + STACK_SIZE as u64 - 8);
         put(low, 32, cpu as *mut CpuBlock as u64);
         let vector = (base >> 12) as u32;
+        APIC_IDS[number as usize].store(apic, Ordering::Relaxed);
+        LOADED_SPACE[number as usize].store(pml4, Ordering::Relaxed);
         let sent = lapic::send_ipi(apic, 0x4500)
             && wait_ns(10_000_000)
             && lapic::send_ipi(apic, 0x4600 | vector)
@@ -196,7 +227,7 @@ pub fn start_application_processors(
     }
     let online = ONLINE.load(Ordering::Acquire);
     kprintln!(
-        "smp: {online} of {} CPUs online; the application processors beat their own timers (nothing is scheduled on them yet)",
+        "smp: {online} of {} CPUs online; each runs the threads put on it in its own windows",
         aps().count() + 1
     );
     online
@@ -254,6 +285,9 @@ extern "sysv64" fn ap_entry(block: *mut CpuBlock) -> ! {
     b.tss.privilege_stack_table[0] = VirtAddr::new(stack_top);
     // No I/O bitmap: every port is denied in ring 3.
     b.tss.iomap_base = core::mem::size_of::<TaskStateSegment>() as u16;
+    // The entry path moves the TSS's ring-0 stack with the running thread, as on the boot
+    // CPU (the CPU reads the TSS only on entries from ring 3).
+    let tss_at = &raw mut b.tss;
     let CpuBlock { gdt, tss, .. } = b;
     *gdt = GlobalDescriptorTable::new();
     // The boot CPU's selector layout, so that SYSCALL/SYSRET (STAR) work the same here.
@@ -275,35 +309,87 @@ extern "sysv64" fn ap_entry(block: *mut CpuBlock) -> ! {
         );
     }
     idt::init();
-    super::syscall::init(number as usize, stack_top);
+    super::syscall::init(number as usize, stack_top, tss_at);
     let (apic, _) = lapic::init(lapic_phys);
     kprintln!("cpu {number} online (apic {apic})");
     ONLINE.fetch_add(1, Ordering::Release);
-    heartbeat(number)
+    super::entry::enter_user_mode()
 }
 
-/// Beats a second of an AP's local APIC timer while it waits.
-const HEARTBEAT_HZ: u64 = 100;
+/// Makes `cpu` look at its state again (`entry::on_reschedule`).
+pub fn send_reschedule(cpu: usize) {
+    let apic = APIC_IDS[cpu].load(Ordering::Relaxed);
+    lapic::send_ipi(apic, FIXED | u32::from(idt::RESCHEDULE_VECTOR));
+}
 
-/// An AP's wait: its own local APIC timer beats [`HEARTBEAT_HZ`] times a second
-/// (periodic, vector [`idt::HEARTBEAT_VECTOR`]) and each second the AP logs `cpu <n>:
-/// heartbeat <beats> longest_gap_us=<us>`: the proof that each core takes its own timer's
-/// interrupts on time.
-/// The AP touches no kernel object, so it never takes the kernel's lock.
-fn heartbeat(number: u64) -> ! {
-    let ticks = lapic::timer_hz() / HEARTBEAT_HZ;
-    lapic::start_periodic(idt::HEARTBEAT_VECTOR, ticks as u32);
-    let (mut beats, mut last, mut longest) = (0u64, crate::time::since_boot_ns(), 0);
-    loop {
-        x86_64::instructions::interrupts::enable_and_hlt();
-        x86_64::instructions::interrupts::disable();
-        let now = crate::time::since_boot_ns();
-        (beats, longest, last) = (beats + 1, longest.max(now - last), now);
-        if beats.is_multiple_of(HEARTBEAT_HZ) {
-            let gap_us = core::mem::take(&mut longest) / 1000;
-            kprintln!("cpu {number}: heartbeat {beats} longest_gap_us={gap_us}");
+/// `cpu` loaded the address space with root table `root` (under the kernel lock).
+pub fn set_loaded_space(cpu: usize, root: u64) {
+    LOADED_SPACE[cpu].store(root, Ordering::Release);
+}
+
+/// Before the page tables of the space with root table `root` lose entries (`leave`:
+/// before they are freed), every other CPU that has it loaded flushes its TLB (or loads
+/// the kernel's tables); returns once all have answered. Called under the kernel lock.
+#[cfg(not(test))]
+pub fn release_space(root: u64, leave: bool) {
+    // An answer takes at most this long (every kernel path is bounded and a CPU waiting for
+    // the lock answers while it waits): past it the machine is broken, and the kernel
+    // stops rather than free tables a CPU may still walk.
+    const ANSWER_WITHIN_NS: u64 = 100_000_000;
+    let me = super::entry::this_cpu();
+    let online = ONLINE.load(Ordering::Acquire);
+    let mut waiting = 0u64;
+    for cpu in (0..online).filter(|&c| c != me) {
+        if LOADED_SPACE[cpu].load(Ordering::Acquire) == root {
+            SPACE_REQUEST[cpu].store(root | if leave { LEAVE } else { 0 }, Ordering::Release);
+            let apic = APIC_IDS[cpu].load(Ordering::Relaxed);
+            lapic::send_ipi(apic, FIXED | u32::from(idt::SPACE_VECTOR));
+            waiting |= 1 << cpu;
         }
     }
+    let until = crate::time::since_boot_ns() + ANSWER_WITHIN_NS;
+    while waiting != 0 {
+        let cpu = waiting.trailing_zeros() as usize;
+        if SPACE_REQUEST[cpu].load(Ordering::Acquire) == 0 {
+            waiting &= !(1 << cpu);
+        } else if crate::time::since_boot_ns() > until {
+            panic!("cpu {cpu} did not answer an address-space request within 100 ms");
+        }
+        core::hint::spin_loop();
+    }
+}
+
+/// Host tests have one CPU.
+#[cfg(test)]
+pub fn release_space(_root: u64, _leave: bool) {}
+
+/// Answers this CPU's address-space request, if any (from its interrupt, or while it waits
+/// for the kernel lock); true if it left the space it ran in (then it must not return to
+/// the thread it interrupted: that thread is gone).
+pub fn serve_space_request() -> bool {
+    let me = super::entry::this_cpu();
+    let request = SPACE_REQUEST[me].load(Ordering::Acquire);
+    if request == 0 {
+        return false;
+    }
+    let root = request & !LEAVE;
+    let (loaded, flags) = Cr3::read_raw();
+    let mut left = false;
+    if loaded.start_address().as_u64() == root {
+        let next = if request & LEAVE != 0 {
+            left = true;
+            let kernel = KERNEL_SPACE.load(Ordering::Relaxed);
+            LOADED_SPACE[me].store(kernel, Ordering::Release);
+            x86_64::structures::paging::PhysFrame::containing_address(x86_64::PhysAddr::new(kernel))
+        } else {
+            loaded
+        };
+        // SAFETY: the kernel's boot tables or the loaded ones (a reload flushes the TLB);
+        // both map the kernel half this code runs in.
+        unsafe { Cr3::write_raw(next, flags) };
+    }
+    SPACE_REQUEST[me].store(0, Ordering::Release);
+    left
 }
 
 #[cfg(test)]

@@ -153,11 +153,13 @@ pub fn root_paths() {
             offset: 0,
             duration: MS,
             partition: 1,
+            cpu: 0,
         },
         WindowSpec {
             offset: MS,
             duration: ROOT_FRAME - MS,
             partition: 2,
+            cpu: 0,
         },
     ];
     if let Err(e) = sys::schedule_set(0, ROOT_FRAME, &windows).and(sys::schedule_switch(0)) {
@@ -198,6 +200,7 @@ extern "C" fn root_attacker(_: u64) -> ! {
         offset: 0,
         duration: 0,
         partition: 0,
+        cpu: 0,
     }; MAX_WINDOWS as usize];
     let step = ROOT_FRAME / MAX_WINDOWS;
     for (i, w) in windows.iter_mut().enumerate() {
@@ -205,6 +208,7 @@ extern "C" fn root_attacker(_: u64) -> ! {
             offset: i as u64 * step,
             duration: step,
             partition: 1 + i as u64 % 15,
+            cpu: 0,
         };
     }
     // Every port above the kernel's last range (`KERNEL_PORTS`: the PCI configuration

@@ -251,6 +251,7 @@ fn windows(spawner: &mut Spawner, samples: &mut [u32; SAMPLES]) {
         offset,
         duration,
         partition,
+        cpu: 0,
     };
     sys::schedule_set(
         0,

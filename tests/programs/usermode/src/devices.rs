@@ -183,6 +183,7 @@ pub fn run() {
         offset,
         duration,
         partition,
+        cpu: 0,
     };
     must(
         "schedule_set",

@@ -245,6 +245,7 @@ pub fn run() {
         offset,
         duration,
         partition,
+        cpu: 0,
     };
     expect_err(
         "schedule_set with overlapping windows is InvalidArgument",
@@ -379,6 +380,7 @@ fn schedule_switch(
                 offset: OFFSET,
                 duration: MS,
                 partition: 3,
+                cpu: 0,
             }],
         ),
     );
@@ -391,6 +393,7 @@ fn schedule_switch(
                 offset: 0,
                 duration: MS,
                 partition: 1,
+                cpu: 0,
             }],
         ),
         Error::NotPermitted,
