@@ -32,6 +32,7 @@ mod exceptions;
 mod ipc;
 mod memory;
 mod quota;
+mod smp;
 mod tasks;
 mod timepart;
 
@@ -55,6 +56,7 @@ fn main(image_base: u64, image_len: u64) {
         b"no-handler" => return exceptions::run_no_handler(),
         b"windows" => return timepart::run(),
         b"irq-ports" => return devices::run(),
+        b"smp" => return smp::run(),
         _ => {}
     }
     if mode == b"kernel-read" {
