@@ -251,7 +251,8 @@ impl TimeTable {
 }
 
 impl Kernel {
-    /// A timer event at `now`: time-outs and window boundaries.
+    /// A timer event at `now` (or another CPU's interrupt): time-outs and window
+    /// boundaries.
     pub fn on_timer(&mut self, now: u64) {
         // The one-shot timer has fired: re-arm it even if it fired a little early (its
         // count is rounded down) and nothing is due yet, or the next event would be missed.
@@ -261,6 +262,12 @@ impl Kernel {
         }
         if now >= self.core().next_boundary {
             self.update_window(self.cpu, now);
+        }
+        // Another CPU whose boundary has passed too is interrupted (`cpus_to_kick`), so
+        // that all switch together even when its own timer comes late (QEMU's -icount
+        // delays a halted CPU's timer that expires at the instant the running one's does).
+        for core in self.cores[..self.online].iter_mut() {
+            core.timer_dirty |= now >= core.next_boundary;
         }
     }
 

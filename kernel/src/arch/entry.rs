@@ -29,7 +29,7 @@ use crate::syscall::Outcome;
 use crate::table::{TaskIdx, ThreadIdx};
 use crate::{fault, qemu, time};
 use core::arch::naked_asm;
-use core::sync::atomic::{AtomicBool, Ordering};
+use core::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use spin::{Mutex, MutexGuard};
 use x86_64::structures::tss::TaskStateSegment;
 
@@ -119,19 +119,53 @@ fn activate_frame(context: *mut TrapFrame) {
     unsafe { (*tss).privilege_stack_table[0] = top };
 }
 
+/// The CPUs waiting for the kernel's lock.
+static WAITING: AtomicU64 = AtomicU64::new(0);
+
+/// The kernel's lock, held by this CPU. Letting go of it while another CPU waits, the CPU
+/// pauses once (`pause`): nothing on hardware, but under QEMU's deterministic time the
+/// CPUs run in turns, a `pause` ends a turn, and an interrupt does not; without it the
+/// waiting CPU would get the lock only when this one's turn ends, milliseconds later.
+struct Locked(Option<MutexGuard<'static, Kernel>>);
+
+impl core::ops::Deref for Locked {
+    type Target = Kernel;
+    fn deref(&self) -> &Kernel {
+        self.0.as_ref().expect("held until dropped")
+    }
+}
+
+impl core::ops::DerefMut for Locked {
+    fn deref_mut(&mut self) -> &mut Kernel {
+        self.0.as_mut().expect("held until dropped")
+    }
+}
+
+impl Drop for Locked {
+    fn drop(&mut self) {
+        self.0 = None;
+        if WAITING.load(Ordering::Acquire) != 0 {
+            core::hint::spin_loop();
+        }
+    }
+}
+
 /// Takes the kernel's lock for this CPU, answering address-space requests while it waits
 /// (the holder may be waiting for this CPU's answer).
-fn lock_kernel() -> MutexGuard<'static, Kernel> {
+fn lock_kernel() -> Locked {
+    let me = this_cpu();
     let mut k = loop {
         if let Some(k) = KERNEL.try_lock() {
             break k;
         }
+        WAITING.fetch_or(1 << me, Ordering::AcqRel);
         super::smp::serve_space_request();
         core::hint::spin_loop();
     };
-    k.cpu = this_cpu();
+    WAITING.fetch_and(!(1 << me), Ordering::AcqRel);
+    k.cpu = me;
     k.core_mut().kicked = false;
-    k
+    Locked(Some(k))
 }
 
 #[unsafe(naked)]
@@ -219,9 +253,10 @@ pub fn on_line_interrupt(line: usize, from_user: bool) {
     on_interrupt(from_user, |k| k.irq_fired(line));
 }
 
-/// Another CPU changed this one's state: it chooses again and programs its timer.
+/// Another CPU changed this one's state, or saw its window boundary pass: it catches up
+/// with its schedule, chooses again and programs its timer.
 pub fn on_reschedule(from_user: bool) {
-    on_interrupt(from_user, |_| {});
+    on_interrupt(from_user, |k| k.on_timer(time::since_boot_ns()));
 }
 
 /// An interrupt: lets `event` update the kernel (an interrupted thread's registers are
@@ -249,13 +284,18 @@ fn program_timer(k: &mut Kernel) {
     }
 }
 
-/// Interrupts the other CPUs whose state this entry changed.
+/// Interrupts the other CPUs whose state this entry changed, then pauses once so that
+/// under QEMU's deterministic time they get their turn now (see [`Locked`]).
 fn kick_others(k: &mut Kernel) {
     let mut kick = k.cpus_to_kick();
+    if kick == 0 {
+        return;
+    }
     while kick != 0 {
         super::smp::send_reschedule(kick.trailing_zeros() as usize);
         kick &= kick - 1;
     }
+    core::hint::spin_loop();
 }
 
 /// Opens and closes IOAPIC lines until they match what the kernel state wants.
@@ -273,7 +313,7 @@ fn apply_line_masks(k: &mut Kernel) {
 
 /// Picks the next thread (unless the outcome names it) and makes its frame the one the
 /// exit restores, halting until one is ready.
-fn finish(mut k: MutexGuard<'static, Kernel>, outcome: Outcome) {
+fn finish(mut k: Locked, outcome: Outcome) {
     let mut chosen = match outcome {
         Outcome::Halt { success } => qemu::exit(if success {
             qemu::ExitCode::Success
