@@ -2,7 +2,7 @@
 //! syssw decodes at boot. This layout is an interface contract between the host tools and
 //! syssw; any change bumps [`VERSION`].
 //!
-//! # Layout, version 4
+//! # Layout, version 5
 //!
 //! All integers are little-endian; no field is aligned (read them with `from_le_bytes`).
 //! Names are fixed 32-byte fields of UTF-8, NUL-padded: non-empty, no NUL inside, only NULs
@@ -12,7 +12,7 @@
 //! Header (96 bytes)
 //! offset size field
 //! 0      8    magic "WRDNCONF"
-//! 8      4    version (4)
+//! 8      4    version (5)
 //! 12     4    CRC-32 (IEEE, abi::crc32) of bytes [16, total size)
 //! 16     4    total size in bytes = 96 + the sizes of all tables below
 //! 20     4    reserved
@@ -27,7 +27,8 @@
 //! 76     2    T  ports              (<= 128)
 //! 78     2    C  channels           (<= 128)
 //! 80     2    D  channel destinations (<= 128)
-//! 82     6    reserved
+//! 82     1    CPUs the system uses (1..=8, MAX_CPUS): CPUs 0..this
+//! 83     5    reserved
 //! 88     8    module health table: byte e = action for error e (see below), 0 = not set
 //! 96          the tables, in this order, back to back without padding:
 //!
@@ -40,12 +41,14 @@
 //!             partition, bits 2i..2i+2 for partition i: 0 ignore, 1 idle, 2 cold_start,
 //!             3 warm_start; the bits above the last partition's are zero
 //!
-//! Window (24 bytes) x W; per schedule sorted by offset, disjoint, duration > 0,
-//! offset + duration <= major frame
+//! Window (24 bytes) x W; per schedule sorted by offset, those of one CPU disjoint (every
+//! CPU has its own windows in the one major frame: windows of different CPUs may overlap),
+//! duration > 0, offset + duration <= major frame
 //! 0      8    offset in the major frame (ns)
 //! 8      8    duration (ns, at least MIN_WINDOW: 10 us)
-//! 16     1    time partition 1..=15 (one some partition uses)
-//! 17     7    reserved
+//! 16     1    time partition 1..=15 (one some partition of this CPU uses)
+//! 17     1    CPU whose schedule it is in (< the system's CPUs)
+//! 18     6    reserved
 //!
 //! Shared segment (40 bytes) x G
 //! 0      32   name
@@ -72,7 +75,8 @@
 //! 124    2    first attachment, 126  2  attachment count
 //! 128    2    first port,       130  2  port count
 //! 132    1    PCI device count (<= pci::MAX_PARTITION_DEVICES)
-//! 133    3    reserved
+//! 133    1    CPU its threads run on (< the system's CPUs)
+//! 134    2    reserved
 //! 136    16   PCI devices: routing ids (u16), the unused slots zero; none owned twice
 //! 152    8    DMA region in bytes (`dma`; 0 = none; multiple of 4096, <= memory, only
 //!             with PCI devices)
@@ -131,7 +135,7 @@ pub use abi::layout::Field;
 use abi::syscall::Abilities;
 
 pub const MAGIC: [u8; 8] = *b"WRDNCONF";
-pub const VERSION: u32 = 4;
+pub const VERSION: u32 = 5;
 pub const NAME_SIZE: usize = 32;
 pub const HEADER_SIZE: usize = header::SIZE;
 pub const SCHEDULE_SIZE: usize = schedule::SIZE;
@@ -158,11 +162,13 @@ pub mod header {
     pub const fn count(i: usize) -> Field {
         Field::new(64 + 2 * i, 2)
     }
-    pub const RESERVED_B: Field = Field::new(82, 6);
+    /// CPUs the system uses (1..=`MAX_CPUS`).
+    pub const CPUS: Field = Field::new(82, 1);
+    pub const RESERVED_B: Field = Field::new(83, 5);
     pub const HEALTH: Field = Field::new(88, 8);
     pub const SIZE: usize = 96;
     /// Every field, in order (the counts as one run).
-    pub const FIELDS: [Field; 10] = [
+    pub const FIELDS: [Field; 11] = [
         MAGIC,
         VERSION,
         CRC,
@@ -171,6 +177,7 @@ pub mod header {
         NAME,
         MEMORY,
         Field::new(64, 18),
+        CPUS,
         RESERVED_B,
         HEALTH,
     ];
@@ -200,9 +207,11 @@ pub mod window {
     pub const OFFSET: Field = Field::new(0, 8);
     pub const DURATION: Field = Field::new(8, 8);
     pub const TIME_PARTITION: Field = Field::new(16, 1);
-    pub const RESERVED: Field = Field::new(17, 7);
+    /// The CPU whose schedule the window is in.
+    pub const CPU: Field = Field::new(17, 1);
+    pub const RESERVED: Field = Field::new(18, 6);
     pub const SIZE: usize = 24;
-    pub const FIELDS: [Field; 4] = [OFFSET, DURATION, TIME_PARTITION, RESERVED];
+    pub const FIELDS: [Field; 5] = [OFFSET, DURATION, TIME_PARTITION, CPU, RESERVED];
 }
 
 /// Shared-segment record fields.
@@ -239,14 +248,16 @@ pub mod partition {
     pub const PORT_COUNT: Field = Field::new(130, 2);
     /// How many of `DEVICES` are used (at most `pci::MAX_PARTITION_DEVICES`).
     pub const DEVICE_COUNT: Field = Field::new(132, 1);
-    pub const RESERVED_B: Field = Field::new(133, 3);
+    /// The CPU its threads run on.
+    pub const CPU: Field = Field::new(133, 1);
+    pub const RESERVED_B: Field = Field::new(134, 2);
     /// The PCI functions it owns: `DEVICE_COUNT` routing ids (`pci::Address::id`, u16 LE),
     /// the unused ones zero.
     pub const DEVICES: Field = Field::new(136, 16);
     /// Bytes of its DMA region (`dma`; 0: none).
     pub const DMA: Field = Field::new(152, 8);
     pub const SIZE: usize = 160;
-    pub const FIELDS: [Field; 24] = [
+    pub const FIELDS: [Field; 25] = [
         NAME,
         IMAGE,
         MEMORY,
@@ -268,6 +279,7 @@ pub mod partition {
         FIRST_PORT,
         PORT_COUNT,
         DEVICE_COUNT,
+        CPU,
         RESERVED_B,
         DEVICES,
         DMA,
@@ -614,6 +626,9 @@ impl<'a> SystemView<'a> {
         if memory == 0 || !memory.is_multiple_of(PAGE_SIZE) {
             return fail("memory is zero or not a multiple of 4 KiB");
         }
+        if !(1..=MAX_CPUS).contains(&usize::from(header::CPUS.u8(h))) {
+            return fail("CPU count not in 1..=8");
+        }
         if HealthTable::from_bytes(header::HEALTH.bytes(h)).is_none() {
             return fail("unknown module health action");
         }
@@ -666,14 +681,19 @@ impl<'a> SystemView<'a> {
             if count > MAX_WINDOWS {
                 return fail("more than 32 windows");
             }
-            let mut previous_end = 0;
+            // The end of the latest window of each CPU so far, and the latest offset.
+            let mut previous_end = [0u64; MAX_CPUS];
+            let mut previous_offset = 0;
             for w in first..first + count {
                 let r = self.record(Table::Window, w);
                 let fail = |what| Err(invalid(Table::Window, w, what));
                 let (offset, duration) = (W::OFFSET.get(r), W::DURATION.get(r));
-                let tp = W::TIME_PARTITION.u8(r);
+                let (tp, cpu) = (W::TIME_PARTITION.u8(r), W::CPU.u8(r));
                 if !W::RESERVED.is_zero(r) {
                     return fail("reserved bytes are not zero");
+                }
+                if cpu >= self.cpus() {
+                    return fail("CPU beyond the system's CPUs");
                 }
                 if duration < MIN_WINDOW {
                     return fail("shorter than the kernel's shortest window (10 us)");
@@ -681,17 +701,26 @@ impl<'a> SystemView<'a> {
                 if offset.checked_add(duration).is_none_or(|end| end > frame) {
                     return fail("ends after the major frame");
                 }
-                if offset < previous_end {
-                    return fail("overlaps the previous window or is not sorted by offset");
+                if offset < previous_offset {
+                    return fail("not sorted by offset");
                 }
-                previous_end = offset + duration;
+                previous_offset = offset;
+                let end = &mut previous_end[usize::from(cpu)];
+                if offset < *end {
+                    return fail("overlaps the previous window of its CPU");
+                }
+                *end = offset + duration;
                 if tp == 0 || tp >= TIME_PARTITIONS {
                     return fail("time partition not in 1..=15");
                 }
-                let used = (0..self.count(Table::Partition))
-                    .any(|p| partition::TIME_PARTITION.u8(self.record(Table::Partition, p)) == tp);
-                if !used {
+                let users = (0..self.count(Table::Partition))
+                    .map(|p| self.record(Table::Partition, p))
+                    .filter(|r| partition::TIME_PARTITION.u8(r) == tp);
+                if users.clone().next().is_none() {
                     return fail("time partition used by no partition");
+                }
+                if !users.into_iter().any(|r| partition::CPU.u8(r) == cpu) {
+                    return fail("time partition used by no partition of its CPU");
                 }
             }
         }
@@ -794,6 +823,9 @@ impl<'a> SystemView<'a> {
             }
             if P::TIME_PARTITION.u8(r) >= TIME_PARTITIONS {
                 return Err(fail("time partition above 15"));
+            }
+            if P::CPU.u8(r) >= self.cpus() {
+                return Err(fail("CPU beyond the system's CPUs"));
             }
             if !P::RESERVED_B.is_zero(r) {
                 return Err(fail("reserved bytes are not zero"));
@@ -1043,6 +1075,11 @@ impl<'a> SystemView<'a> {
         header::MEMORY.get(self.bytes)
     }
 
+    /// How many CPUs the system uses (1..=[`MAX_CPUS`]): CPUs 0..this.
+    pub fn cpus(&self) -> u8 {
+        header::CPUS.u8(self.bytes)
+    }
+
     /// The module health table.
     pub fn health(&self) -> HealthTable {
         HealthTable::from_bytes(header::HEALTH.bytes(self.bytes)).unwrap_or_default()
@@ -1112,6 +1149,7 @@ impl<'a> SystemView<'a> {
             mcp: P::MCP.u8(r),
             priority: P::PRIORITY.u8(r),
             time_partition: P::TIME_PARTITION.u8(r),
+            cpu: P::CPU.u8(r),
             schedule_control: P::FLAGS.u8(r) & FLAG_SCHEDULE_CONTROL != 0,
             dma: P::DMA.get(r),
             dma_unconfined: P::FLAGS.u8(r) & FLAG_DMA_UNCONFINED != 0,
@@ -1254,12 +1292,19 @@ impl<'a> ScheduleView<'a> {
             offset: window::OFFSET.get(r),
             duration: window::DURATION.get(r),
             time_partition: window::TIME_PARTITION.u8(r),
+            cpu: window::CPU.u8(r),
         }
     }
 
     pub fn windows(&self) -> impl Iterator<Item = Window> + 'a {
         let s = *self;
         (0..s.window_count).map(move |i| s.window(i))
+    }
+
+    /// The windows of CPU `cpu`'s schedule (those a partition bound to it runs in), in
+    /// offset order.
+    pub fn windows_of(&self, cpu: u8) -> impl Iterator<Item = Window> + 'a {
+        self.windows().filter(move |w| w.cpu == cpu)
     }
 }
 
@@ -1292,6 +1337,9 @@ pub struct PartitionView<'a> {
     pub priority: u8,
     /// 0 = background.
     pub time_partition: u8,
+    /// The CPU its threads run on: in that CPU's windows of its time partition (or in that
+    /// CPU's background).
+    pub cpu: u8,
     /// May switch the module schedule (ARINC SET_MODULE_SCHEDULE).
     pub schedule_control: bool,
     /// Bytes of its DMA region (`dma`; 0: none): physically contiguous, part of `memory`.
@@ -1447,7 +1495,7 @@ mod encode {
         }
     }
 
-    /// Writes the version-1 blob of a validated system (see the module documentation).
+    /// Writes the blob of a validated system (see the module documentation).
     /// Panics if `system` breaks the format's limits, which [`crate::load`] rules out.
     pub fn encode(system: &System) -> Vec<u8> {
         let mut out = Vec::new();
@@ -1461,6 +1509,7 @@ mod encode {
             .set(header::VERSION, u64::from(VERSION))
             .name(header::NAME, &system.name)
             .set(header::MEMORY, system.memory)
+            .set(header::CPUS, u64::from(system.cpus))
             .raw(header::HEALTH, &system.health.to_bytes());
         let counts = [
             system.schedules.len(),
@@ -1495,6 +1544,7 @@ mod encode {
                 .set(window::OFFSET, w.offset)
                 .set(window::DURATION, w.duration)
                 .set(window::TIME_PARTITION, u64::from(w.time_partition))
+                .set(window::CPU, u64::from(w.cpu))
                 .write(&mut out);
         }
         for g in &system.segments {
@@ -1519,6 +1569,7 @@ mod encode {
                 .set(P::MCP, u64::from(p.mcp))
                 .set(P::PRIORITY, u64::from(p.priority))
                 .set(P::TIME_PARTITION, u64::from(p.time_partition))
+                .set(P::CPU, u64::from(p.cpu))
                 .set(
                     P::FLAGS,
                     u64::from(

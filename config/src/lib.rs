@@ -28,15 +28,17 @@
 //! [system]
 //! name = "demo"                   # optional, default "system"
 //! memory = "512MiB"               # RAM budget (see "Budgets")
+//! cpus = 2                        # optional, default 1 (at most 8), see "CPUs"
 //!
 //! [[schedules]]                   # up to 4; the first is the initial schedule
 //! name = "normal"                 # optional for the first (default "default")
 //! major_frame = "10ms"            # optional: default = end of the last window
 //! change_actions = { io = "cold_start" }  # optional: per partition, see "Time"
-//! [[schedules.windows]]           # up to 32 per schedule; inside the frame, disjoint
+//! [[schedules.windows]]           # up to 32 per schedule; in the frame, disjoint per CPU
 //! partition = "plc"               # a partition that is not background
 //! offset = "0ms"
 //! duration = "2ms"                # windows and major frames last at least 10us
+//! cpu = 0                         # optional: its partition's CPU, the default
 //! # A single schedule may also be written as [schedule] + [[schedule.windows]].
 //!
 //! [[shared_memory]]               # up to 32 segments
@@ -55,6 +57,7 @@
 //! abilities = ["debug_log"]       # optional, see "Abilities"
 //! native_syscalls = true          # optional, default true; a paravirtualized guest says false
 //! time = 1                        # optional: "background" (TP0) or a time partition 1..=15
+//! cpus = [0]                      # optional, default [0]: its CPU (one), see "CPUs"
 //! preempts_windows = false         # optional, background only: see "Time"
 //! schedule_control = false        # optional: may switch the module schedule, see "Time"
 //! io_ports = ["0x2f8-0x2ff", "0x60", 0x61]   # inclusive ranges, hex or decimal
@@ -127,6 +130,23 @@
 //! `warm_start` (it restarts in that mode with start condition PARTITION_RESTART; a warm
 //! start of a partition still in COLD_START is a cold one). They are not applied at boot,
 //! to an IDLE partition, or to a partition being restarted at the time.
+//!
+//! **CPUs.** `[system] cpus` says how many CPUs the system uses (1..=8, default 1), CPUs
+//! 0 (the boot CPU) to `cpus` − 1; `cargo xtask` boots it with at least that many. Every
+//! CPU has its own schedule of windows within each major frame (the frames of all CPUs
+//! start together; a schedule switch takes effect on every CPU at once). A partition is
+//! bound to one CPU, `cpus = [n]` (default `[0]`; a list, as multicore ARINC 653 systems
+//! write it, but of exactly one CPU for now: a partition runs on one CPU), below the
+//! system's `cpus`: its threads run only there, in that CPU's windows of its time
+//! partition, or, for a background partition, in the time that CPU's windows leave. A
+//! window is in the schedule of its partition's CPU; `cpu = n` may say so and must name
+//! that CPU. Windows of one CPU must not overlap; windows of different CPUs may, and
+//! usually do (the point of running partitions side by side). A fixed `time = N` needs a
+//! window on the partition's CPU, and a background partition must stay below the floor
+//! of the windowed partitions of its own CPU only. syssw binds every partition's first
+//! thread to its CPU (the threads it creates stay there); a machine with fewer CPUs
+//! online than a partition's stops the boot with `syssw: configuration rejected:
+//! partition NAME: CPU n is not online ...`.
 //!
 //! **Abilities.** Every partition has `native_syscalls` unless `native_syscalls = false`;
 //! `abilities` adds any of `create_task`, `create_thread`, `map`, `irq`, `io_ports`,

@@ -21,6 +21,9 @@ pub const MIN_WINDOW: u64 = syscall::MIN_WINDOW;
 /// Shortest PLC task deadline (`plc.deadline`, ns): the runtime checks the clock every
 /// thousand VM instructions, a few microseconds apart.
 pub const MIN_TASK_DEADLINE: u64 = 100_000;
+/// Most CPUs a system may use (`[system] cpus`; the machine description's
+/// [`abi::machine::MAX_CPUS`]). CPU 0 is the boot CPU.
+pub const MAX_CPUS: usize = abi::machine::MAX_CPUS;
 /// Number of time partitions; 0 is the background, windows use 1..TIME_PARTITIONS.
 pub const TIME_PARTITIONS: u8 = syscall::TIME_PARTITIONS as u8;
 /// Most shared-memory segments.
@@ -381,6 +384,9 @@ pub struct Window {
     pub duration: u64,
     /// Time partition 1..[`TIME_PARTITIONS`].
     pub time_partition: u8,
+    /// The CPU whose schedule it is in (the CPU of the partition it names; 0 = the boot
+    /// CPU). Every CPU has its own windows in the one major frame.
+    pub cpu: u8,
 }
 
 impl Window {
@@ -394,7 +400,7 @@ impl Window {
             offset: self.offset,
             duration: self.duration,
             partition: self.time_partition as u64,
-            cpu: 0,
+            cpu: self.cpu as u64,
         }
     }
 }

@@ -36,6 +36,8 @@ pub struct Document {
 pub struct SystemSection {
     pub name: Option<Spanned<String>>,
     pub memory: Spanned<Scalar>,
+    /// How many CPUs the system uses.
+    pub cpus: Option<Spanned<i64>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -56,6 +58,8 @@ pub struct Window {
     pub partition: Spanned<String>,
     pub offset: Spanned<Scalar>,
     pub duration: Spanned<Scalar>,
+    /// The CPU whose schedule the window is in (default: its partition's).
+    pub cpu: Option<Spanned<i64>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -75,6 +79,8 @@ pub struct Partition {
     pub time: Option<Spanned<Scalar>>,
     pub preempts_windows: Option<Spanned<bool>>,
     pub schedule_control: Option<Spanned<bool>>,
+    /// The CPUs it runs on (one, for now).
+    pub cpus: Option<Spanned<Vec<Spanned<i64>>>>,
     #[serde(default)]
     pub io_ports: Vec<Spanned<Scalar>>,
     #[serde(default)]

@@ -14,6 +14,8 @@ pub struct System {
     pub name: String,
     /// RAM budget (bytes).
     pub memory: u64,
+    /// CPUs the system uses (`cpus`, 1..=[`MAX_CPUS`]): CPUs 0..cpus.
+    pub cpus: u8,
     /// The first is the initial schedule.
     pub schedules: Vec<Schedule>,
     /// In the order of the description.
@@ -29,7 +31,7 @@ pub struct Schedule {
     pub name: String,
     /// ns.
     pub major_frame: u64,
-    /// Sorted by offset, disjoint, inside the frame.
+    /// Sorted by offset, inside the frame; those of one CPU disjoint.
     pub windows: Vec<Window>,
     /// What a switch to this schedule does to each partition (`change_actions`).
     pub change_actions: ChangeActions,
@@ -55,6 +57,9 @@ pub struct Partition {
     pub priority: u8,
     /// 0 = background.
     pub time_partition: u8,
+    /// The CPU its threads run on (`cpus = [n]`): in that CPU's windows of its time
+    /// partition, or in that CPU's background.
+    pub cpu: u8,
     /// May switch the module schedule (ARINC SET_MODULE_SCHEDULE).
     pub schedule_control: bool,
     pub io_ports: Vec<IoRange>,
@@ -572,6 +577,7 @@ impl System {
         System {
             name: view.name().to_string(),
             memory: view.memory(),
+            cpus: view.cpus(),
             schedules: view
                 .schedules()
                 .map(|s| Schedule {
@@ -595,6 +601,7 @@ impl System {
                     mcp: p.mcp,
                     priority: p.priority,
                     time_partition: p.time_partition,
+                    cpu: p.cpu,
                     schedule_control: p.schedule_control,
                     io_ports: p.io_ports().collect(),
                     irqs: p.irqs,

@@ -60,6 +60,9 @@ pub fn load_with_warnings(
     let mut v = Validator {
         r: reporter,
         known_images,
+        cpus: 1,
+        cpus_given: false,
+        unbound: Vec::new(),
     };
     let system = v.system(&document);
     if v.r.diagnostics.is_empty() {
@@ -74,6 +77,30 @@ pub fn load_with_warnings(
 struct Validator<'s, 'k> {
     r: Reporter<'s>,
     known_images: &'k dyn Fn(&str) -> bool,
+    /// The CPUs the system uses (`[system] cpus`; [`MAX_CPUS`] when it has an error, so
+    /// that no CPU number is refused twice), and whether the file gives it.
+    cpus: u8,
+    cpus_given: bool,
+    /// Partitions whose `cpus` has an error (their windows' CPUs are then not checked).
+    unbound: Vec<usize>,
+}
+
+/// A valid window of a schedule while the schedule is checked.
+#[derive(Clone, Copy)]
+struct Slot {
+    offset: u64,
+    duration: u64,
+    /// Index of the partition it names.
+    partition: usize,
+    /// Index of the window in the schedule's source.
+    source: usize,
+    cpu: u8,
+}
+
+impl Slot {
+    fn end(self) -> u64 {
+        self.offset + self.duration
+    }
 }
 
 /// Where a port was declared, for channel checks.
@@ -300,6 +327,7 @@ impl Validator<'_, '_> {
             None => "system".to_string(),
         };
 
+        self.cpus = self.system_cpus(section, &sys_path.key("cpus"));
         let segments = self.segments(doc);
         let (mut partitions, times, mut ports) = self.partitions(doc, &segments);
         let schedules = self.schedules(doc, &mut partitions, &times);
@@ -323,12 +351,98 @@ impl Validator<'_, '_> {
         System {
             name,
             memory: memory.unwrap_or(0),
+            cpus: self.cpus,
             schedules,
             partitions,
             segments: segments.into_iter().map(|(s, _)| s).collect(),
             channels,
             health,
         }
+    }
+
+    /// `[system] cpus`: 1..=[`MAX_CPUS`], default 1.
+    fn system_cpus(&mut self, section: &schema::SystemSection, path: &KeyPath) -> u8 {
+        let Some(cpus) = &section.cpus else {
+            return 1;
+        };
+        self.cpus_given = true;
+        let n = *cpus.get_ref();
+        if (1..=MAX_CPUS as i64).contains(&n) {
+            return n as u8;
+        }
+        self.error(
+            start(cpus),
+            path,
+            format!("cpus = {n} is not in 1..={MAX_CPUS} (the most CPUs the kernel runs)"),
+        );
+        MAX_CPUS as u8
+    }
+
+    /// How many CPUs the system uses, for a message about a CPU beyond them.
+    fn cpus_used(&self) -> String {
+        match (self.cpus, self.cpus_given) {
+            (1, false) => "the system uses 1 CPU, CPU 0 (`cpus` in [system], default 1)".into(),
+            (1, true) => "the system uses 1 CPU, CPU 0 (`[system] cpus = 1`)".into(),
+            (n, _) => format!(
+                "the system uses {n} CPUs, 0 to {} (`[system] cpus = {n}`)",
+                n - 1
+            ),
+        }
+    }
+
+    /// A partition's `cpus`: exactly one CPU the system uses (default `[0]`). 0 when it
+    /// has an error (the partition is then marked in `unbound`).
+    fn partition_cpu(
+        &mut self,
+        raw: &schema::Partition,
+        path: &KeyPath,
+        (index, name): (usize, &str),
+    ) -> u8 {
+        let Some(list) = &raw.cpus else {
+            return 0;
+        };
+        let here = path.key("cpus");
+        let entries = list.get_ref();
+        let Some(first) = entries.first() else {
+            self.error(
+                start(list),
+                &here,
+                format!(
+                    "partition `{name}` names no CPU; a partition runs on one CPU: give it, e.g. `cpus = [0]`"
+                ),
+            );
+            self.unbound.push(index);
+            return 0;
+        };
+        if let Some(second) = entries.get(1) {
+            self.error(
+                start(second),
+                &here.index(1),
+                format!(
+                    "partition `{name}` lists {} CPUs; a partition runs on one CPU: give one, e.g. `cpus = [{}]`",
+                    entries.len(),
+                    first.get_ref()
+                ),
+            );
+            self.unbound.push(index);
+        }
+        let n = *first.get_ref();
+        if (0..i64::from(self.cpus)).contains(&n) {
+            return n as u8;
+        }
+        let why = if n < 0 {
+            format!("partition `{name}`: {n} is not a CPU number (CPU 0 is the boot CPU)")
+        } else {
+            format!(
+                "partition `{name}` runs on CPU {n}, but {}",
+                self.cpus_used()
+            )
+        };
+        self.error(start(first), &here.index(0), why);
+        if !self.unbound.contains(&index) {
+            self.unbound.push(index);
+        }
+        0
     }
 
     fn segments(&mut self, doc: &schema::Document) -> Vec<(Segment, usize)> {
@@ -436,6 +550,7 @@ impl Validator<'_, '_> {
 
             let abilities = self.abilities(raw, &path);
             let time = self.time(raw, &path);
+            let cpu = self.partition_cpu(raw, &path, (index, &name));
 
             let io_ports = self.io_ports(doc, raw, &path, index, &mut io_seen);
 
@@ -525,6 +640,7 @@ impl Validator<'_, '_> {
                 mcp,
                 priority,
                 time_partition: 0,
+                cpu,
                 schedule_control: raw.schedule_control.as_ref().is_some_and(|b| *b.get_ref()),
                 io_ports,
                 irqs,
@@ -2824,19 +2940,20 @@ impl Validator<'_, '_> {
             if let Some(frame) = major_frame {
                 self.keep_windows_in_frame(path, raw, frame, &mut windows);
             }
-            windows.sort_by_key(|w| (w.0, w.3));
+            windows.sort_by_key(|w| (w.offset, w.source));
             self.window_overlaps(path, raw, &windows);
-            window_owners.push(windows.iter().map(|w| w.2).collect());
+            window_owners.push(windows.iter().map(|w| w.partition).collect());
             let change_actions = self.change_actions(path, raw, partitions);
             schedules.push(Schedule {
                 name,
                 major_frame: major_frame.unwrap_or(0),
                 windows: windows
                     .iter()
-                    .map(|&(offset, duration, _, _)| Window {
-                        offset,
-                        duration,
+                    .map(|w| Window {
+                        offset: w.offset,
+                        duration: w.duration,
                         time_partition: 0,
+                        cpu: w.cpu,
                     })
                     .collect(),
                 change_actions,
@@ -2965,8 +3082,8 @@ impl Validator<'_, '_> {
         }
     }
 
-    /// A schedule's valid windows as (offset, duration, partition, index in the source);
-    /// marks in `named` every partition a window names (even a window with other errors).
+    /// A schedule's valid windows; marks in `named` every partition a window names (even a
+    /// window with other errors).
     fn schedule_windows(
         &mut self,
         path: &KeyPath,
@@ -2974,8 +3091,8 @@ impl Validator<'_, '_> {
         partitions: &[Partition],
         times: &[Time],
         named: &mut [bool],
-    ) -> Vec<(u64, u64, usize, usize)> {
-        let mut windows: Vec<(u64, u64, usize, usize)> = Vec::new();
+    ) -> Vec<Slot> {
+        let mut windows: Vec<Slot> = Vec::new();
         let entries = array_entries(&raw.windows, &path.key("windows"));
         for Entry {
             index: j,
@@ -3005,6 +3122,9 @@ impl Validator<'_, '_> {
                 ),
                 Some(p) => named[p] = true,
             }
+            // (A background partition's window is refused above.)
+            let windowed = partition.filter(|&p| times[p] != Time::Background);
+            let cpu = self.window_cpu(w, &wpath, windowed.map(|p| (p, &partitions[p])));
             let offset = self.duration(&w.offset, &wpath.key("offset"));
             let duration = self.duration(&w.duration, &wpath.key("duration"));
             if let Some(short) = duration.filter(|&d| d < MIN_WINDOW) {
@@ -3019,7 +3139,9 @@ impl Validator<'_, '_> {
                 );
                 continue;
             }
-            if let (Some(p), Some(offset), Some(duration)) = (partition, offset, duration) {
+            if let (Some(p), Some(offset), Some(duration), Some(cpu)) =
+                (partition, offset, duration, cpu)
+            {
                 if offset.checked_add(duration).is_none() {
                     self.error(
                         start(&w.duration),
@@ -3029,11 +3151,58 @@ impl Validator<'_, '_> {
                     continue;
                 }
                 if !matches!(times[p], Time::Background | Time::Invalid) {
-                    windows.push((offset, duration, p, j));
+                    windows.push(Slot {
+                        offset,
+                        duration,
+                        partition: p,
+                        source: j,
+                        cpu,
+                    });
                 }
             }
         }
         windows
+    }
+
+    /// A window's CPU: its `cpu`, else the CPU of its partition (`partition`, index and
+    /// model, when the window names a known one). It must be a CPU the system uses and the
+    /// partition's; `None` (reported) otherwise.
+    fn window_cpu(
+        &mut self,
+        w: &schema::Window,
+        wpath: &KeyPath,
+        partition: Option<(usize, &Partition)>,
+    ) -> Option<u8> {
+        let bound = partition.filter(|(p, _)| !self.unbound.contains(p));
+        let Some(cpu) = &w.cpu else {
+            // The partition's (0 for a partition without a valid `cpus`: not checked).
+            return Some(bound.map_or(0, |(_, p)| p.cpu));
+        };
+        let here = wpath.key("cpu");
+        let n = *cpu.get_ref();
+        if !(0..i64::from(self.cpus)).contains(&n) {
+            let why = if n < 0 {
+                format!("cpu = {n} is not a CPU number (CPU 0 is the boot CPU)")
+            } else {
+                format!("the window is on CPU {n}, but {}", self.cpus_used())
+            };
+            self.error(start(cpu), &here, why);
+            return None;
+        }
+        if let Some((_, p)) = bound
+            && i64::from(p.cpu) != n
+        {
+            self.error(
+                start(cpu),
+                &here,
+                format!(
+                    "partition `{}` runs on CPU {}; this window is on CPU {n} (a partition's windows are in the schedule of its CPU)",
+                    p.name, p.cpu
+                ),
+            );
+            return None;
+        }
+        Some(n as u8)
     }
 
     /// The major frame: as given, else the end of the last window.
@@ -3041,7 +3210,7 @@ impl Validator<'_, '_> {
         &mut self,
         path: &KeyPath,
         schedule: &Spanned<schema::Schedule>,
-        windows: &[(u64, u64, usize, usize)],
+        windows: &[Slot],
     ) -> Option<u64> {
         let raw = schedule.get_ref();
         match &raw.major_frame {
@@ -3070,7 +3239,7 @@ impl Validator<'_, '_> {
                 }
             }
             None => {
-                let end = windows.iter().map(|w| w.0 + w.1).max();
+                let end = windows.iter().map(|w| w.end()).max();
                 if end.is_none() && raw.windows.is_empty() {
                     self.error(
                         start(schedule),
@@ -3098,9 +3267,10 @@ impl Validator<'_, '_> {
         path: &KeyPath,
         raw: &schema::Schedule,
         frame: u64,
-        windows: &mut Vec<(u64, u64, usize, usize)>,
+        windows: &mut Vec<Slot>,
     ) {
-        windows.retain(|&(offset, duration, _, j)| {
+        windows.retain(|&slot| {
+            let (offset, duration, j) = (slot.offset, slot.duration, slot.source);
             let w = raw.windows[j].get_ref();
             let wpath = path.key("windows").index(j);
             if offset >= frame {
@@ -3131,24 +3301,36 @@ impl Validator<'_, '_> {
         });
     }
 
-    /// Reports windows (sorted by offset) that overlap an earlier one.
-    fn window_overlaps(
-        &mut self,
-        path: &KeyPath,
-        raw: &schema::Schedule,
-        windows: &[(u64, u64, usize, usize)],
-    ) {
-        let mut latest: Option<(u64, u64, usize)> = None;
-        for &(offset, duration, _, j) in windows {
-            if let Some((lo, le, lj)) = latest
+    /// Reports windows (sorted by offset) that overlap an earlier one of the same CPU
+    /// (every CPU has its own schedule: windows of different CPUs may overlap).
+    fn window_overlaps(&mut self, path: &KeyPath, raw: &schema::Schedule, windows: &[Slot]) {
+        // Per CPU, the window reaching furthest so far: (offset, end, source index).
+        let mut latest: [Option<(u64, u64, usize)>; MAX_CPUS] = [None; MAX_CPUS];
+        for &Slot {
+            offset,
+            duration,
+            source: j,
+            cpu,
+            ..
+        } in windows
+        {
+            let latest = &mut latest[usize::from(cpu)];
+            if let Some((lo, le, lj)) = *latest
                 && offset < le
             {
                 let w = raw.windows[j].get_ref();
+                let both = if self.cpus > 1 {
+                    format!(
+                        ", both on CPU {cpu} (the windows of one CPU must not overlap; those of different CPUs may)"
+                    )
+                } else {
+                    String::new()
+                };
                 self.error(
                     start(&w.offset),
                     &path.key("windows").index(j).key("offset"),
                     format!(
-                        "the window {}..{} overlaps window {lj} ({}..{})",
+                        "the window {}..{} overlaps window {lj} ({}..{}){both}",
                         Duration(offset),
                         Duration(offset + duration),
                         Duration(lo),
@@ -3157,24 +3339,24 @@ impl Validator<'_, '_> {
                 );
             }
             if latest.is_none_or(|(_, le, _)| offset + duration > le) {
-                latest = Some((offset, offset + duration, j));
+                *latest = Some((offset, offset + duration, j));
             }
         }
     }
 
     /// A background partition competes by priority with the partition whose window is
-    /// open, so it must stay below every windowed partition's `priority` (its floor) or it
-    /// can take that partition's window away; `preempts_windows = true` on the background
-    /// partition says this is intended (then it is a warning). `preempts_windows` on a
-    /// windowed partition is an error: it means nothing there.
+    /// open on its CPU, so it must stay below the `priority` (the floor) of every windowed
+    /// partition of its CPU or it can take that partition's window away; `preempts_windows
+    /// = true` on the background partition says this is intended (then it is a warning).
+    /// `preempts_windows` on a windowed partition is an error: it means nothing there.
     fn background_priorities(&mut self, doc: &schema::Document, partitions: &[Partition]) {
         let base = KeyPath::root().key("partitions");
         let raw = in_source_order(&doc.partitions);
-        let floor = partitions
-            .iter()
-            .filter(|p| p.time_partition != 0)
-            .min_by_key(|p| p.priority);
         for (p, (_, value)) in partitions.iter().zip(&raw) {
+            let floor = partitions
+                .iter()
+                .filter(|w| w.time_partition != 0 && w.cpu == p.cpu)
+                .min_by_key(|w| w.priority);
             let raw = value.get_ref();
             let path = base.key(&p.name);
             let intended = raw.preempts_windows.as_ref();
@@ -3273,17 +3455,32 @@ impl Validator<'_, '_> {
             };
             partitions[p].time_partition = tp;
         }
+        // A partition runs in the windows of its time partition on its own CPU.
         for (p, time) in times.iter().enumerate() {
             if let Time::Explicit(n, at) = *time {
-                let covered =
-                    (0..partitions.len()).any(|q| named[q] && partitions[q].time_partition == n);
-                if !covered {
-                    let name = partitions[p].name.clone();
+                let cpu = partitions[p].cpu;
+                let windows_on = |on: Option<u8>| {
+                    (0..partitions.len()).any(|q| {
+                        named[q]
+                            && partitions[q].time_partition == n
+                            && on.is_none_or(|c| partitions[q].cpu == c)
+                    })
+                };
+                let name = partitions[p].name.clone();
+                if !windows_on(None) {
                     self.error(
                         at,
                         &base.key(&name).key("time"),
                         format!(
                             "time partition {n} of partition `{name}` has no window in any schedule"
+                        ),
+                    );
+                } else if !windows_on(Some(cpu)) && !self.unbound.contains(&p) {
+                    self.error(
+                        at,
+                        &base.key(&name).key("time"),
+                        format!(
+                            "time partition {n} of partition `{name}` has no window on CPU {cpu}, the CPU it runs on (its windows are those of its CPU's schedule)"
                         ),
                     );
                 }

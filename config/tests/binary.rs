@@ -18,6 +18,7 @@ use proptest::prelude::*;
 const RICH: &str = r#"[system]
 name = "rich"
 memory = "1GiB"
+cpus = 2
 
 [[schedules]]
 name = "normal"
@@ -91,6 +92,7 @@ kernel_memory = "1MiB"
 max_priority = 10
 native_syscalls = false
 time = "background"
+cpus = [1]
 ports.level = { kind = "sampling", direction = "in", size = 8 }
 
 [[channels]]
@@ -150,6 +152,7 @@ fn round_trip() {
     // Spot checks of the view API syssw uses.
     assert_eq!(view.name(), "rich");
     assert_eq!(view.memory(), 1 << 30);
+    assert_eq!(view.cpus(), 2);
     assert_eq!(view.schedule_count(), 2);
     let normal = view.schedule(0);
     assert_eq!(normal.name, "normal");
@@ -198,7 +201,8 @@ fn round_trip() {
     assert_eq!(ranges, ["0x60", "0x2f8-0x2ff", "0x378"]);
     assert_eq!(io.irqs.lines().collect::<Vec<_>>(), [3, 7]);
     let guest = view.find_partition("guest").unwrap();
-    assert_eq!(guest.time_partition, 0);
+    assert_eq!((guest.time_partition, guest.cpu), (0, 1));
+    assert_eq!(ctl.cpu, 0);
     assert!(guest.abilities.is_empty());
     let level = view.channel(0);
     assert_eq!(level.kind, PortKind::Sampling);
@@ -234,6 +238,91 @@ fn round_trip() {
         view.health().get(ErrorCode::PowerFail),
         Some(HealthAction::Shutdown)
     );
+}
+
+/// Two CPUs, each with its own windows: they overlap in time across the CPUs.
+const SMP: &str = r#"[system]
+memory = "512MiB"
+cpus = 2
+
+[[schedules]]
+major_frame = "10ms"
+[[schedules.windows]]
+partition = "a"
+offset = "0ms"
+duration = "4ms"
+[[schedules.windows]]
+partition = "b"
+offset = "1ms"
+duration = "4ms"
+[[schedules.windows]]
+partition = "a"
+offset = "5ms"
+duration = "1ms"
+
+[partitions.a]
+image = "app"
+memory = "1MiB"
+kernel_memory = "64KiB"
+max_priority = 100
+
+[partitions.b]
+image = "app"
+memory = "1MiB"
+kernel_memory = "64KiB"
+max_priority = 100
+cpus = [1]
+"#;
+
+#[test]
+fn windows_of_two_cpus_round_trip() {
+    let system = load_ok(SMP);
+    let blob = binary::encode(&system);
+    let view = decode(&blob).expect("a validated system decodes");
+    assert_eq!(System::from_view(&view), system);
+    let s = view.schedule(0);
+    let all: Vec<(u64, u8, u8)> = s
+        .windows()
+        .map(|w| (w.offset, w.cpu, w.time_partition))
+        .collect();
+    assert_eq!(
+        all,
+        [(0, 0, 1), (1_000_000, 1, 2), (5_000_000, 0, 1)],
+        "sorted by offset"
+    );
+    let specs: Vec<(u64, u64)> = s
+        .windows_of(1)
+        .map(|w| w.spec())
+        .map(|w| (w.offset, w.cpu))
+        .collect();
+    assert_eq!(specs, [(1_000_000, 1)]);
+    assert_eq!(s.windows_of(0).count(), 2);
+    assert_eq!(view.partition(1).cpu, 1);
+
+    let edit = |edit: &dyn Fn(&mut Vec<u8>)| {
+        let mut b = blob.clone();
+        edit(&mut b);
+        reseal(&mut b);
+        decode(&b).expect_err("damage accepted")
+    };
+    let w = |b: &Vec<u8>, i| record(b, Table::Window, i);
+    // b's window moved to CPU 0 overlaps a's first window there.
+    invalid(Table::Window, 1, "overlaps the previous window of its CPU")(edit(&|b| {
+        let at = w(b, 1);
+        window::CPU.set(&mut b[at..], 0);
+    }));
+    // Out of offset order.
+    invalid(Table::Window, 1, "not sorted by offset")(edit(&|b| {
+        let at = w(b, 1);
+        window::OFFSET.set(&mut b[at..], 0);
+        let at = w(b, 0);
+        window::OFFSET.set(&mut b[at..], 2_000_000);
+    }));
+    // a bound to CPU 1: its windows on CPU 0 serve no partition there.
+    invalid(Table::Window, 0, "used by no partition of its CPU")(edit(&|b| {
+        let at = record(b, Table::Partition, 0);
+        partition::CPU.set(&mut b[at..], 1);
+    }));
 }
 
 #[test]
@@ -374,6 +463,8 @@ fn header_damage() {
     let e = damaged(|b| header::count(2).set(b, 1));
     assert!(matches!(e, DecodeError::SizeMismatch { .. }), "{e:?}");
     invalid(Table::Header, 0, "reserved")(damaged(|b| header::RESERVED_B.bytes_mut(b)[2] = 1));
+    invalid(Table::Header, 0, "CPU count")(damaged(|b| header::CPUS.set(b, 0)));
+    invalid(Table::Header, 0, "CPU count")(damaged(|b| header::CPUS.set(b, 9)));
     invalid(Table::Header, 0, "module health")(damaged(|b| header::HEALTH.bytes_mut(b)[0] = 9));
 }
 
@@ -417,6 +508,19 @@ fn window_damage() {
         let at = w(b, 1);
         window::OFFSET.set(&mut b[at..], 1_000_000);
     }));
+    invalid(Table::Window, 1, "CPU beyond the system's CPUs")(damaged(|b| {
+        let at = w(b, 1);
+        window::CPU.set(&mut b[at..], 2);
+    }));
+    // io's time partition has no partition on CPU 1.
+    invalid(Table::Window, 1, "used by no partition of its CPU")(damaged(|b| {
+        let at = w(b, 1);
+        window::CPU.set(&mut b[at..], 1);
+    }));
+    invalid(Table::Window, 0, "reserved bytes")(damaged(|b| {
+        let at = w(b, 0);
+        window::RESERVED.bytes_mut(&mut b[at..])[0] = 1;
+    }));
     invalid(Table::Window, 2, "ends after the major frame")(damaged(|b| {
         let at = w(b, 2);
         window::DURATION.set(&mut b[at..], u64::MAX);
@@ -449,6 +553,10 @@ fn partition_damage() {
     invalid(Table::Partition, 0, "unknown flags")(damaged(|b| {
         let at = p(b, 0);
         partition::FLAGS.set(&mut b[at..], 4);
+    }));
+    invalid(Table::Partition, 2, "CPU beyond the system's CPUs")(damaged(|b| {
+        let at = p(b, 2);
+        partition::CPU.set(&mut b[at..], 2);
     }));
     invalid(Table::Partition, 0, "priority above the MCP")(damaged(|b| {
         let at = p(b, 0);

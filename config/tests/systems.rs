@@ -184,3 +184,72 @@ fn plc_guest_system() {
         Some(HealthAction::Idle)
     );
 }
+
+/// The two-CPU example of the scenarios' systems: on each CPU a window at the same offset
+/// and a background partition.
+#[test]
+fn smp_partitions_system() {
+    let path =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../tests/configs/smp_partitions.toml");
+    let s = load_file(&path);
+    assert_eq!(s.cpus, 2);
+    let partitions: Vec<(&str, u8, u8)> = s
+        .partitions
+        .iter()
+        .map(|p| (p.name.as_str(), p.cpu, p.time_partition))
+        .collect();
+    assert_eq!(
+        partitions,
+        [
+            ("windows-a", 0, 1),
+            ("windows-b", 1, 2),
+            ("cpu0", 0, 0),
+            ("hog1", 1, 0)
+        ]
+    );
+    let windows: Vec<(u64, u8, u8)> = s.schedules[0]
+        .windows
+        .iter()
+        .map(|w| (w.offset, w.cpu, w.time_partition))
+        .collect();
+    assert_eq!(windows, [(0, 0, 1), (0, 1, 2)]);
+    let blob = config::binary::encode(&s);
+    let view = config::decode(&blob).expect("the encoded form decodes");
+    assert_eq!(System::from_view(&view), s);
+    let beta = view.find_partition("windows-b").unwrap();
+    let theirs: Vec<u64> = view
+        .schedule(0)
+        .windows_of(beta.cpu)
+        .map(|w| w.spec().cpu)
+        .collect();
+    assert_eq!(theirs, [1]);
+
+    // Both windows on CPU 0 (windows-b bound to it): they overlap.
+    let source = std::fs::read_to_string(&path).unwrap();
+    let one_cpu = common::edit(
+        &source,
+        &[
+            ("cpu = 1\n", "cpu = 0\n"),
+            (
+                "cpus = [1]\nhealth.illegal_request",
+                "cpus = [0]\nhealth.illegal_request",
+            ),
+        ],
+    );
+    common::expect_one(
+        &one_cpu,
+        "\"0ms\"",
+        1,
+        "schedules[0].windows[1].offset",
+        "the window 0ns..4ms overlaps window 0 (0ns..4ms), both on CPU 0 (the windows of one CPU must not overlap; those of different CPUs may)",
+    );
+    // windows-b's window on CPU 0 while windows-b runs on CPU 1.
+    let elsewhere = common::edit(&source, &[("cpu = 1\n", "cpu = 0\n")]);
+    common::expect_one(
+        &elsewhere,
+        "cpu = ^0",
+        1,
+        "schedules[0].windows[1].cpu",
+        "partition `windows-b` runs on CPU 1; this window is on CPU 0",
+    );
+}

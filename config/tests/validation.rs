@@ -1851,3 +1851,204 @@ fn an_eight_megabyte_file_is_checked_in_seconds() {
     load_ok(&src);
     assert!(started.elapsed().as_secs() < 60, "{:?}", started.elapsed());
 }
+
+// ---- CPUs -------------------------------------------------------------------------------
+
+/// `BASE` on two CPUs (`[system] cpus = 2`), with `edits` applied after.
+fn two_cpus(edits: &[(&str, &str)]) -> String {
+    let mut all = vec![("memory = \"512MiB\"", "memory = \"512MiB\"\ncpus = 2")];
+    all.extend_from_slice(edits);
+    doc(&all)
+}
+
+/// Partition `c` (windowed, `max_priority = 100`) on CPU `cpu` with a window at 1ms..3ms
+/// in the only schedule, for `# tail`.
+fn partition_c(cpu: u8) -> String {
+    format!(
+        "[partitions.c]\nimage = \"app\"\nmemory = \"1MiB\"\nkernel_memory = \"64KiB\"\nmax_priority = 100\ncpus = [{cpu}]\n\n[[schedules.windows]]\npartition = \"c\"\noffset = \"1ms\"\nduration = \"2ms\"\n"
+    )
+}
+
+#[test]
+fn one_cpu_and_cpu_zero_by_default() {
+    let s = load_ok(BASE);
+    assert_eq!(s.cpus, 1);
+    assert!(s.partitions.iter().all(|p| p.cpu == 0));
+    let window = s.schedules[0].windows[0];
+    assert_eq!((window.cpu, window.spec().cpu), (0, 0));
+}
+
+#[test]
+fn system_cpus_within_the_kernels_limit() {
+    assert_eq!(load_ok(&two_cpus(&[])).cpus, 2);
+    let eight = doc(&[("memory = \"512MiB\"", "memory = \"512MiB\"\ncpus = 8")]);
+    assert_eq!(load_ok(&eight).cpus, 8);
+    for n in ["0", "9", "-1"] {
+        let src = doc(&[(
+            "memory = \"512MiB\"",
+            &format!("memory = \"512MiB\"\ncpus = {n}"),
+        )]);
+        expect_one(
+            &src,
+            &format!("cpus = ^{n}"),
+            0,
+            "system.cpus",
+            &format!("cpus = {n} is not in 1..=8 (the most CPUs the kernel runs)"),
+        );
+    }
+}
+
+#[test]
+fn partitions_and_their_windows_carry_their_cpu() {
+    // `a` on CPU 1: its window (without `cpu`) is in CPU 1's schedule.
+    let s = load_ok(&two_cpus(&[("# a", "cpus = [1]")]));
+    assert_eq!(s.cpus, 2);
+    assert_eq!((s.partitions[0].cpu, s.partitions[1].cpu), (1, 0));
+    let window = s.schedules[0].windows[0];
+    assert_eq!((window.cpu, window.spec().cpu), (1, 1));
+    // Saying so changes nothing.
+    let explicit = two_cpus(&[
+        ("# a", "cpus = [1]"),
+        ("duration = \"2ms\"", "duration = \"2ms\"\ncpu = 1"),
+    ]);
+    assert_eq!(load_ok(&explicit), s);
+}
+
+#[test]
+fn a_partition_runs_on_one_cpu() {
+    let src = two_cpus(&[("# a", "cpus = [0, 1]")]);
+    expect_one(
+        &src,
+        "cpus = [0, ^1]",
+        0,
+        "partitions.a.cpus[1]",
+        "partition `a` lists 2 CPUs; a partition runs on one CPU: give one, e.g. `cpus = [0]`",
+    );
+    let src = two_cpus(&[("# a", "cpus = []")]);
+    expect_one(
+        &src,
+        "cpus = ^[]",
+        0,
+        "partitions.a.cpus",
+        "partition `a` names no CPU; a partition runs on one CPU: give it, e.g. `cpus = [0]`",
+    );
+}
+
+#[test]
+fn a_partition_on_a_cpu_the_system_does_not_use() {
+    let src = doc(&[("# a", "cpus = [1]")]);
+    expect_one(
+        &src,
+        "cpus = [^1]",
+        0,
+        "partitions.a.cpus[0]",
+        "partition `a` runs on CPU 1, but the system uses 1 CPU, CPU 0 (`cpus` in [system], default 1)",
+    );
+    let src = two_cpus(&[("# b", "cpus = [2]")]);
+    expect_one(
+        &src,
+        "cpus = [^2]",
+        0,
+        "partitions.b.cpus[0]",
+        "partition `b` runs on CPU 2, but the system uses 2 CPUs, 0 to 1 (`[system] cpus = 2`)",
+    );
+    let src = two_cpus(&[("# b", "cpus = [-1]")]);
+    expect_one(
+        &src,
+        "cpus = [^-1]",
+        0,
+        "partitions.b.cpus[0]",
+        "partition `b`: -1 is not a CPU number (CPU 0 is the boot CPU)",
+    );
+}
+
+#[test]
+fn a_window_on_another_cpu_than_its_partition() {
+    let src = two_cpus(&[
+        ("# a", "cpus = [1]"),
+        ("duration = \"2ms\"", "duration = \"2ms\"\ncpu = 0"),
+    ]);
+    expect_one(
+        &src,
+        "cpu = ^0",
+        0,
+        "schedules[0].windows[0].cpu",
+        "partition `a` runs on CPU 1; this window is on CPU 0 (a partition's windows are in the schedule of its CPU)",
+    );
+}
+
+#[test]
+fn a_window_on_a_cpu_the_system_does_not_use() {
+    let src = doc(&[("duration = \"2ms\"", "duration = \"2ms\"\ncpu = 1")]);
+    expect_one(
+        &src,
+        "cpu = ^1",
+        0,
+        "schedules[0].windows[0].cpu",
+        "the window is on CPU 1, but the system uses 1 CPU, CPU 0 (`cpus` in [system], default 1)",
+    );
+    let src = two_cpus(&[("duration = \"2ms\"", "duration = \"2ms\"\ncpu = 2")]);
+    expect_one(
+        &src,
+        "cpu = ^2",
+        0,
+        "schedules[0].windows[0].cpu",
+        "the window is on CPU 2, but the system uses 2 CPUs, 0 to 1 (`[system] cpus = 2`)",
+    );
+}
+
+#[test]
+fn windows_of_different_cpus_may_overlap() {
+    // a (CPU 0) 0ms..2ms and c (CPU 1) 1ms..3ms.
+    let s = load_ok(&two_cpus(&[("# tail", &partition_c(1))]));
+    let windows: Vec<(u64, u8, u8)> = s.schedules[0]
+        .windows
+        .iter()
+        .map(|w| (w.offset, w.cpu, w.time_partition))
+        .collect();
+    assert_eq!(windows, [(0, 0, 1), (1_000_000, 1, 2)]);
+    // Both on CPU 0: they overlap.
+    let src = two_cpus(&[("# tail", &partition_c(0))]);
+    expect_one(
+        &src,
+        "\"1ms\"",
+        0,
+        "schedules[0].windows[1].offset",
+        "the window 1ms..3ms overlaps window 0 (0ns..2ms), both on CPU 0 (the windows of one CPU must not overlap; those of different CPUs may)",
+    );
+}
+
+#[test]
+fn a_fixed_time_partition_needs_a_window_on_its_cpu() {
+    // c shares a's time partition 1, whose only window is on CPU 0.
+    let c = |cpu| {
+        format!(
+            "[partitions.c]\nimage = \"app\"\nmemory = \"1MiB\"\nkernel_memory = \"64KiB\"\nmax_priority = 100\ntime = 1\ncpus = [{cpu}]\n"
+        )
+    };
+    load_ok(&two_cpus(&[("# a", "time = 1"), ("# tail", &c(0))]));
+    let src = two_cpus(&[("# a", "time = 1"), ("# tail", &c(1))]);
+    expect_one(
+        &src,
+        "time = ^1",
+        1,
+        "partitions.c.time",
+        "time partition 1 of partition `c` has no window on CPU 1, the CPU it runs on",
+    );
+}
+
+#[test]
+fn a_background_partition_competes_only_on_its_cpu() {
+    // b (background, MCP 100) would outrank a (priority 100) in a's window on CPU 0; on
+    // CPU 1 there is no window to take.
+    let above = ("max_priority = 50", "max_priority = 100");
+    load_ok(&two_cpus(&[above, ("# b", "cpus = [1]")]));
+    let src = two_cpus(&[above, ("# b", "cpus = [0]")]);
+    expect_one(
+        &src,
+        "max_priority = ^100\ntime",
+        0,
+        "partitions.b.max_priority",
+        "background partition `b` has max_priority 100 >= priority 100 of windowed partition `a`",
+    );
+}
