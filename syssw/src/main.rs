@@ -5,15 +5,17 @@
 //! partition a resource partition (kernel-memory quota), a task (abilities, MCP), its image
 //! loaded into zeroed memory with the segments' rights, a stack with the start record
 //! (`user_rt::partition`), I/O-port and interrupt grants, shared-memory segments and the
-//! first thread in its time partition; then it installs the schedules, starts the
-//! partitions and serves them ([`server`]: ports, modes, health monitor, restarts). Two
-//! threads: the server thread answers every request and fault report at once, the restart
-//! worker ([`restart`]) rebuilds restarted partitions in their own windows. It must never
+//! first thread in its time partition on its CPU; then it installs the schedules (the
+//! windows of every CPU), starts the partitions and serves them ([`server`]: ports, modes,
+//! health monitor, restarts). Two threads: the server thread answers every request and
+//! fault report at once, the restart worker ([`restart`]) rebuilds restarted partitions in
+//! their own windows. It must never
 //! allocate after start-up and never trusts a partition: everything it gets from one is
 //! checked.
 //!
 //! Log lines (an interface): `syssw: partition NAME: TP<n>|background, MCP m, priority p,
-//! memory used/total KiB, kernel memory k KiB, ports ..., irqs ...` per partition, then
+//! memory used/total KiB, kernel memory k KiB, ports ..., irqs ...` per partition (in a
+//! system of several CPUs `TP<n> on CPU c, MCP ...`), then
 //! `syssw: N partitions started, schedule NAME (major frame F us, W windows)`; fatal
 //! configuration problems as `syssw: configuration rejected: REASON` followed by a failure
 //! halt.
@@ -134,7 +136,7 @@ fn main(image_base: u64, image_len: u64) {
             instance: Some(instance),
             mode,
         });
-        log_partition(&p, used);
+        log_partition(&p, used, system.cpus());
     }
     // From here on the worker owns the loader (frame allocator, placements).
     let worker = restart::create_worker(loader, me)
@@ -170,7 +172,8 @@ fn main(image_base: u64, image_len: u64) {
         sys::schedule_switch(0).unwrap_or_else(|e| reject(format_args!("schedule_switch: {e:?}")));
     }
     // The server thread stays in TP0 above every other thread: it only runs to serve
-    // requests and faults.
+    // requests and faults. It stays on the boot CPU (CPU 0), where syssw starts, and
+    // serves the partitions of every CPU from there.
     sys::set_health_monitor(me).unwrap_or_else(|e| reject(format_args!("health monitor: {e:?}")));
     let _ = sys::thread_set(None, ThreadAttribute::TimePartition, 0);
     sys::thread_set(
@@ -210,7 +213,9 @@ fn not_started(name: &str, problem: &devices::DeviceProblem) -> server::Partitio
     }
 }
 
-fn log_partition(p: &config::binary::PartitionView, used: u64) {
+/// The partition's start line; `cpus`: the CPUs of the system (with more than one, the
+/// line names the partition's).
+fn log_partition(p: &config::binary::PartitionView, used: u64, cpus: u8) {
     let mut irqs = [0u8; 24];
     let mut n = 0;
     for line in p.irqs.lines() {
@@ -218,9 +223,10 @@ fn log_partition(p: &config::binary::PartitionView, used: u64) {
         n += 1;
     }
     println!(
-        "syssw: partition {}: {}, MCP {}, priority {}, memory {}/{} KiB, kernel memory {} KiB, {} I/O range(s), irqs {:?}",
+        "syssw: partition {}: {}{}, MCP {}, priority {}, memory {}/{} KiB, kernel memory {} KiB, {} I/O range(s), irqs {:?}",
         p.name,
         TimePartition(p.time_partition),
+        OnCpu((cpus > 1).then_some(p.cpu)),
         p.mcp,
         p.priority,
         used / 1024,
@@ -229,6 +235,18 @@ fn log_partition(p: &config::binary::PartitionView, used: u64) {
         p.io_ports().count(),
         &irqs[..n]
     );
+}
+
+/// ` on CPU c`, or nothing (a system of one CPU).
+struct OnCpu(Option<u8>);
+
+impl core::fmt::Display for OnCpu {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self.0 {
+            Some(cpu) => write!(f, " on CPU {cpu}"),
+            None => Ok(()),
+        }
+    }
 }
 
 /// `background` for TP0, else `TP<n>`.

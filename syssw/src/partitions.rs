@@ -5,7 +5,8 @@
 //! their rights, its data entry read-only at `DATA_BASE`, its memory pool (partitions with
 //! the `map` ability: the rest of its `memory`) read-write at `POOL_BASE` and read-execute at
 //! `POOL_EXEC_BASE`, a stack holding the start record, grants I/O ports and interrupts, maps
-//! the shared-memory segments and creates the first thread (inactive until started).
+//! the shared-memory segments and creates the first thread (inactive until started) in
+//! the partition's time partition, on its CPU (the threads it creates stay there).
 //!
 //! The [`Loader`] owns everything this needs that changes (the frame allocator and its
 //! scratch window) or that only it reads (the placements): one thread owns it at a time,
@@ -42,6 +43,9 @@ pub enum LoadError {
     },
     Spawn(SpawnError),
     Kernel(&'static str, Error),
+    /// The CPU it is bound to (`cpus`) is not online: the machine has fewer CPUs than the
+    /// configuration uses.
+    CpuOffline(u8),
     /// Its PCI devices cannot be granted: only this partition stays stopped.
     Devices(crate::devices::DeviceProblem),
 }
@@ -65,6 +69,10 @@ impl core::fmt::Display for LoadError {
             ),
             Self::Spawn(e) => write!(f, "out of memory or addresses: {e:?}"),
             Self::Kernel(call, e) => write!(f, "{call} failed: {e:?}"),
+            Self::CpuOffline(cpu) => write!(
+                f,
+                "CPU {cpu} is not online (thread_set Cpu failed: InvalidArgument); the machine has fewer CPUs than the configuration's `cpus`"
+            ),
             Self::Devices(problem) => write!(f, "{problem}"),
         }
     }
@@ -461,5 +469,10 @@ fn instantiate(
             p.time_partition as u64,
         ),
     )?;
+    // Its CPU: the threads it creates run there too (a new thread runs on its creator's).
+    sys::thread_set(Some(thread), ThreadAttribute::Cpu, p.cpu as u64).map_err(|e| match e {
+        Error::InvalidArgument => LoadError::CpuOffline(p.cpu),
+        e => LoadError::Kernel("thread_set Cpu", e),
+    })?;
     Ok(Instance { task, thread })
 }

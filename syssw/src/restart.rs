@@ -17,7 +17,8 @@
 //! at syssw's priority ([`config::model::SYSSW_PRIORITY`], above every partition thread, one
 //! below the server thread's [`SERVER_PRIORITY`], so the server still answers at once); a
 //! background partition's restart runs at that partition's priority (it competes as the
-//! partition itself would).
+//! partition itself would). On a machine of several CPUs the worker moves to the restarted
+//! partition's CPU too (`syssw_core::restart::worker_place`); the server stays on CPU 0.
 //!
 //! Log lines (an interface): the health monitor's line the server handed over and the
 //! restart's mode-change line (`crate::server`) when it starts;

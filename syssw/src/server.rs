@@ -8,13 +8,17 @@
 //! slow. A windowed partition's fault report or REPORT_ERROR that comes too near the end of
 //! its window is handled at the start of its next window instead (`syssw_core::deferred`;
 //! an action that stops the partition stops its task at once), so that the handling never
-//! runs into the next partition's window. Restarts: a restart's quick part (forget the old task, reset its ports) is done here at once,
-//! the rest (kill the old task, print the health line, reload, zero and map the memory,
-//! create the task and its first thread) by the restart worker (`crate::restart`) in the
-//! restarted partition's own windows, while this thread goes on serving (who kills and
-//! prints when the worker cannot start at once: `syssw_core::restart`). The worker asks for jobs with a `call` answered when one is
-//! queued (`syssw_core::restart`) and reports the new instance with its next call; this
-//! thread then records it and starts its first thread. Requests that wait (queuing ports)
+//! runs into the next partition's window (on its own CPU, CPU 0: the reports of a
+//! partition bound to another CPU are handled at once, see `syssw_core::deferred`).
+//! Restarts: a restart's quick part (forget the old task, reset its ports) is done here at
+//! once, the rest (kill the old task, print the health line, reload, zero and map the
+//! memory, create the task and its first thread) by the restart worker (`crate::restart`)
+//! in the restarted partition's own windows (on its CPU: the worker moves there), while
+//! this thread goes on serving (who kills and prints when the worker cannot start at once:
+//! `syssw_core::restart`).
+//! The worker asks for jobs with a `call` answered when one is queued
+//! (`syssw_core::restart`) and reports the new instance with its next call; this thread
+//! then records it and starts its first thread. Requests that wait (queuing ports)
 //! are parked in `syssw_core::ports` and answered later with a deferred `reply`, like the
 //! worker's; the receive time-out is the earliest waiter's deadline, so time-outs are
 //! answered on time.
@@ -42,7 +46,7 @@ use syssw_core::health::{
 };
 use syssw_core::mode::{ModeChange, OperatingMode, PartitionMode, StartCondition};
 use syssw_core::ports::{Completion, NEVER, Outcome, Ports, Waiter};
-use syssw_core::restart::{Job, Kind, Report, Restarts};
+use syssw_core::restart::{Job, Kind, Report, Restarts, SYSSW_CPU, in_own_windows, worker_place};
 use syssw_core::schedule::ModuleSchedule;
 use syssw_core::staging::Staging;
 use user_rt::abi::ipc::{LABEL_FAULT_REPORT, MessageTag, REPLY_KILL};
@@ -79,8 +83,9 @@ pub struct Server<'a> {
     /// The restart worker (`crate::restart`) and the restarts queued for it.
     pub worker: ThreadId,
     pub restarts: Restarts,
-    /// The worker's time partition and priority since the last job (`None`: as created).
-    pub worker_place: Option<(u8, u8)>,
+    /// The worker's CPU, time partition and priority since the last job (`None`: as
+    /// created).
+    pub worker_place: Option<(u8, u8, u8)>,
     /// Which schedule runs and comes next, as SET/GET_MODULE_SCHEDULE_* see it.
     pub schedule: ModuleSchedule,
     /// Whether some partition's devices may DMA (then blocked DMA is polled for), and
@@ -648,15 +653,16 @@ impl<'a> Server<'a> {
     }
 
     /// ARINC PERIOD and DURATION of a partition: the first schedule's major frame and the
-    /// sum of its windows there (0 and 0 for a background partition).
+    /// sum of its windows there, those of its CPU (0 and 0 for a background partition).
     fn period_and_duration(&self, index: usize) -> (u64, u64) {
-        let tp = self.system.partition(index).time_partition;
+        let p = self.system.partition(index);
+        let tp = p.time_partition;
         if tp == 0 || self.system.schedule_count() == 0 {
             return (0, 0);
         }
         let s = self.system.schedule(0);
         let duration = s
-            .windows()
+            .windows_of(p.cpu)
             .filter(|w| w.time_partition == tp)
             .map(|w| w.duration)
             .sum();
@@ -739,10 +745,13 @@ impl<'a> Server<'a> {
     /// (first thing in its next window, above every thread of it). Handled at once: a
     /// background partition's reports, a module shutdown, a restart the worker can start at
     /// once (the server only forgets the task and queues the job), a report the full queue
-    /// refuses.
+    /// refuses, the report of a partition bound to another CPU than this thread's (its
+    /// windows are not this CPU's: this thread's work takes time from this CPU's window
+    /// whenever it is done).
     fn defer(&mut self, report: deferred::Report) -> bool {
         let index = report.partition;
-        let tp = self.system.partition(index).time_partition;
+        let p = self.system.partition(index);
+        let tp = p.time_partition;
         let action = decide(&self.system, Some(index), report.error);
         // A restart the worker takes at once costs the server less than a stop: its slow
         // part, the health line included, runs in the partition's windows anyway.
@@ -751,6 +760,7 @@ impl<'a> Server<'a> {
             HealthAction::ColdRestart | HealthAction::WarmRestart
         ) && self.restarts.worker_idle();
         if tp == 0
+            || p.cpu != SYSSW_CPU
             || quick_restart
             || matches!(
                 action,
@@ -765,7 +775,7 @@ impl<'a> Server<'a> {
         if !self.deferred.waiting(index) && deferred::fits(start, length, report.time) {
             return false;
         }
-        let window = self.window_after(tp, start, length, report.time);
+        let window = self.window_after((tp, p.cpu), start, length, report.time);
         if self.deferred.push(report, window).is_err() {
             return false;
         }
@@ -790,26 +800,22 @@ impl<'a> Server<'a> {
         Some(window)
     }
 
-    /// The start of time partition `tp`'s next window when its window (from the kernel's
-    /// `partition_info`) is `start..start + length` at `now`: that one if it has not begun,
-    /// else the one after it in the running schedule.
-    fn window_after(&mut self, tp: u8, start: u64, length: u64, now: u64) -> u64 {
+    /// The start of the next window of time partition `tp` on CPU `cpu` (`place`) when its
+    /// window (from the kernel's `partition_info`) is `start..start + length` at `now`:
+    /// that one if it has not begun, else the one after it in the running schedule.
+    fn window_after(&mut self, place: (u8, u8), start: u64, length: u64, now: u64) -> u64 {
         if start > now {
             return start;
         }
         let s = self
             .system
             .schedule(self.schedule.status(now).current as usize);
-        let mut windows = [config::model::Window {
-            offset: 0,
-            duration: 0,
-            time_partition: 0,
-        }; config::model::MAX_WINDOWS];
+        let mut windows = [config::model::Window::default(); config::model::MAX_WINDOWS];
         let n = s.window_count();
         for (w, window) in windows.iter_mut().zip(s.windows()) {
             *w = window;
         }
-        deferred::next_window_after(&windows[..n], s.major_frame, tp, start, length)
+        deferred::next_window_after(&windows[..n], s.major_frame, place, start, length)
     }
 
     /// Handles the waiting error reports whose partition's window has come and has room for
@@ -822,7 +828,8 @@ impl<'a> Server<'a> {
             if !self.deferred.due(index, now) {
                 continue;
             }
-            let tp = self.system.partition(index).time_partition;
+            let p = self.system.partition(index);
+            let tp = p.time_partition;
             let Some((start, length)) = self.window_of(index, tp, now) else {
                 continue;
             };
@@ -834,7 +841,7 @@ impl<'a> Server<'a> {
                 now = sys::clock();
             }
             if self.deferred.waiting(index) {
-                let window = self.window_after(tp, start, length, now);
+                let window = self.window_after((tp, p.cpu), start, length, now);
                 self.deferred.wait_until(index, window);
             }
         }
@@ -912,8 +919,7 @@ impl<'a> Server<'a> {
     /// partition's window is running.
     fn restart(&mut self, index: usize, warm: bool, health: Option<Record>) {
         let old = self.forget(index);
-        let at_once =
-            self.system.partition(index).time_partition != 0 && self.restarts.worker_idle();
+        let at_once = in_own_windows(&self.system.partition(index)) && self.restarts.worker_idle();
         if let (Some(task), false) = (old, at_once) {
             let _ = sys::task_stop(task);
         }
@@ -962,31 +968,30 @@ impl<'a> Server<'a> {
         instance.map(|i| i.task)
     }
 
-    /// Hands the next queued restart to the worker if it waits for one, in the restarted
-    /// partition's time partition, so that partition's windows pay for the reload: at
-    /// syssw's priority there (above every thread of the partition it may have to kill,
-    /// below this thread), or for a background partition at its priority (it competes
-    /// for the background as the partition itself would).
+    /// Hands the next queued restart to the worker if it waits for one, where
+    /// `syssw_core::restart::worker_place` puts it: on the restarted partition's CPU and in
+    /// its time partition, so that partition's windows pay for the reload, at syssw's
+    /// priority there (above every thread of the partition it may have to kill, below this
+    /// thread), or for a background partition at its priority (it competes for the
+    /// background as the partition itself would).
     fn dispatch(&mut self) {
         let Some(job) = self.restarts.dispatch() else {
             return;
         };
         let p = self.system.partition(job.partition);
-        let priority = match p.time_partition {
-            0 => p.priority,
-            _ => config::model::SYSSW_PRIORITY,
-        };
         // A partition restarting again and again finds the worker where it was (two
         // system calls less on the path a fault report takes).
-        let place = (p.time_partition, priority);
+        let place = worker_place(&p);
+        let (cpu, time_partition, priority) = place;
         if self.worker_place != Some(place) {
+            // The worker waits for this reply, so no CPU runs it and it may move.
             let worker = Some(self.worker);
-            let moved = sys::thread_set(
-                worker,
-                ThreadAttribute::TimePartition,
-                p.time_partition as u64,
-            )
-            .and_then(|()| sys::thread_set(worker, ThreadAttribute::Priority, priority as u64));
+            let moved = sys::thread_set(worker, ThreadAttribute::Cpu, cpu as u64)
+                .and_then(|()| {
+                    let tp = time_partition as u64;
+                    sys::thread_set(worker, ThreadAttribute::TimePartition, tp)
+                })
+                .and_then(|()| sys::thread_set(worker, ThreadAttribute::Priority, priority as u64));
             if let Err(e) = moved {
                 self.worker_failed(format_args!("cannot move it to {}: {e:?}", p.name));
             }

@@ -539,16 +539,17 @@ fn port_map<'a>(p: &'a Partition, link: &PlcLink) -> PortMap<'a> {
 }
 
 /// Every cyclic task's INTERVAL must be a multiple of the partition's period (the major
-/// frame of each schedule that gives it windows): the task processes are released at
-/// window starts.
+/// frame of each schedule that gives it windows, on its CPU): the task processes are
+/// released at window starts.
 fn check_tasks(system: &System, index: usize, p: &Partition, image: &[u8]) -> Result<()> {
     let image = plc_vm::image::Image::parse(image)
         .map_err(|e| anyhow::anyhow!("partition {}: {e}", p.name))?;
+    let own = &system.partitions[index];
     for schedule in &system.schedules {
         let has_window = schedule
             .windows
             .iter()
-            .any(|w| w.time_partition == system.partitions[index].time_partition);
+            .any(|w| w.time_partition == own.time_partition && w.cpu == own.cpu);
         if !has_window {
             continue;
         }

@@ -233,8 +233,14 @@ pub fn command(
 ) -> Command {
     let mut cmd = Command::new(&qemu.binary);
     cmd.args(MACHINE);
-    // `WARDEN_SMP=N`: N CPUs (a scenario's own `-smp` in `qemu_args` comes later and wins).
-    if let Some(cpus) = std::env::var_os("WARDEN_SMP") {
+    // At least the CPUs the booted system uses, or `WARDEN_SMP=N` if that is more (a
+    // scenario's own `-smp` in `qemu_args` comes later and wins).
+    let configured = match media {
+        Media::Esp(esp) => configured_cpus(esp),
+        Media::Linux(_) => None,
+    };
+    let smp_env = std::env::var("WARDEN_SMP").ok();
+    if let Some(cpus) = smp(smp_env.as_deref(), configured) {
         cmd.arg("-smp").arg(cpus);
     }
     cmd.arg("-drive").arg(format!(
@@ -288,6 +294,31 @@ pub fn command(
         cmd.args(["-icount", "shift=1,sleep=off"]);
     }
     cmd
+}
+
+/// The `-smp` value of a run: the larger of `WARDEN_SMP` (`warden_smp`) and the CPUs the
+/// booted system's configuration uses (`configured`, see [`configured_cpus`]); none when
+/// neither asks for more than QEMU's one CPU. A `WARDEN_SMP` that is not a plain count
+/// (such as `4,sockets=2`) is passed on as it is.
+pub fn smp(warden_smp: Option<&str>, configured: Option<u8>) -> Option<String> {
+    let configured = configured.map_or(1, u32::from);
+    match warden_smp.map(str::trim) {
+        Some(text) => match text.parse::<u32>() {
+            Ok(n) => Some(n.max(configured).to_string()),
+            Err(_) => Some(text.to_string()),
+        },
+        None => (configured > 1).then(|| configured.to_string()),
+    }
+}
+
+/// How many CPUs the system in the ESP folder `esp` uses: `[system] cpus` of the `config`
+/// entry of its `system.img`; `None` when it has none that decodes (no configuration, a
+/// damaged image on purpose).
+pub fn configured_cpus(esp: &Path) -> Option<u8> {
+    let bytes = std::fs::read(esp.join("system.img")).ok()?;
+    let image = abi::sysimg::SystemImage::parse(&bytes).ok()?;
+    let entry = image.find("config")?;
+    config::decode(entry.data).ok().map(|system| system.cpus())
 }
 
 fn stop(child: &mut Child) {
@@ -771,6 +802,36 @@ mod tests {
             ..options
         };
         assert!(run_cut(&tools, &terminal, &cut).is_err());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn a_system_boots_with_at_least_its_cpus() {
+        assert_eq!(smp(None, None), None);
+        assert_eq!(smp(None, Some(1)), None);
+        assert_eq!(smp(None, Some(2)).as_deref(), Some("2"));
+        assert_eq!(smp(Some("4"), Some(2)).as_deref(), Some("4"));
+        assert_eq!(smp(Some("1"), Some(2)).as_deref(), Some("2"));
+        assert_eq!(smp(Some(" 2 "), None).as_deref(), Some("2"));
+        assert_eq!(
+            smp(Some("4,sockets=2"), Some(2)).as_deref(),
+            Some("4,sockets=2")
+        );
+
+        let dir = std::env::temp_dir().join(format!("warden-smp-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        assert_eq!(configured_cpus(&dir), None, "no system.img");
+        let source = "[system]\nmemory = \"64MiB\"\ncpus = 3\n";
+        let blob = config::compile("smp.toml", source, &|_| true).unwrap();
+        let entries = [crate::esp::ImageEntry::Bytes {
+            name: "config".into(),
+            data: blob,
+        }];
+        let image = crate::esp::build_system_image(&entries).unwrap();
+        std::fs::write(dir.join("system.img"), &image).unwrap();
+        assert_eq!(configured_cpus(&dir), Some(3));
+        std::fs::write(dir.join("system.img"), &image[..image.len() / 2]).unwrap();
+        assert_eq!(configured_cpus(&dir), None, "a damaged image");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

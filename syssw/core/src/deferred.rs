@@ -13,10 +13,13 @@
 //! What is not deferred: an action that stops the partition (IDLE, a restart) stops its
 //! task at once (`task_stop`, a bounded kernel call), so nothing of it runs on before its
 //! bookkeeping; a module shutdown is carried out at once; a background partition's reports
-//! (it has no window) are handled at once; so is a restart the restart worker can start at
-//! once (`crate::restart`: the server's share is forgetting the task and queueing the job,
-//! less than stopping the task; the worker kills it and prints the health line in the
-//! partition's windows, above every thread of it). The reporting thread waits for its answer
+//! (it has no window) are handled at once; so are the reports of a partition bound to
+//! another CPU than the server's (every CPU has its own windows: the server's work takes
+//! time from its own CPU's window whenever it runs, so waiting would gain nothing); so is
+//! a restart the restart worker can start at once (`crate::restart`: the server's share is
+//! forgetting the task and queueing the job, less than stopping the task; the worker kills
+//! it and prints the health line in the partition's windows, above every thread of it).
+//! The reporting thread waits for its answer
 //! (killed, or REPORT_ERROR answered) until the report is handled; no other thread of the
 //! partition waits. When the queue is full ([`DEFERRED_MAX`] reports, one per waiting
 //! thread) a report is handled at once as before.
@@ -152,18 +155,23 @@ pub fn fits(start: u64, length: u64, now: u64) -> bool {
     start <= now && now.saturating_add(need) <= end
 }
 
-/// The start of the window of time partition `tp` that follows its window `start..start +
-/// length` in a schedule with these `windows` and `major_frame`. If several of its windows
-/// could be the current one (same length), the earliest candidate: a wake-up before the
-/// window only finds it not started yet (the glue then asks the kernel for the exact start).
+/// The start of the window of time partition `tp` on CPU `cpu` that follows its window
+/// `start..start + length` in a schedule with these `windows` (of every CPU: only `cpu`'s
+/// count) and `major_frame`. If several of its windows could be the current one (same
+/// length), the earliest candidate: a wake-up before the window only finds it not started
+/// yet (the glue then asks the kernel for the exact start).
 pub fn next_window_after(
     windows: &[Window],
     major_frame: u64,
-    tp: u8,
+    (tp, cpu): (u8, u8),
     start: u64,
     length: u64,
 ) -> u64 {
-    let own = || windows.iter().filter(|w| w.time_partition == tp);
+    let own = || {
+        windows
+            .iter()
+            .filter(|w| w.time_partition == tp && w.cpu == cpu)
+    };
     let first = own().map(|w| w.offset).min();
     own()
         .filter(|w| w.duration == length && w.offset <= start)
@@ -193,6 +201,7 @@ mod tests {
             offset,
             duration,
             time_partition: tp,
+            cpu: 0,
         }
     }
 
@@ -226,7 +235,7 @@ mod tests {
         let one = [window(0, 1_000_000, 1), window(1_000_000, 4_000_000, 2)];
         // TP2's window at 11 ms (frame from 10 ms): the next at 16 ms.
         assert_eq!(
-            next_window_after(&one, 5_000_000, 2, 11_000_000, 4_000_000),
+            next_window_after(&one, 5_000_000, (2, 0), 11_000_000, 4_000_000),
             16_000_000
         );
         // Two windows of TP1 in a frame: from the first to the second, from the second to
@@ -236,13 +245,48 @@ mod tests {
             window(1_000, 2_000, 2),
             window(3_000, 5_000, 1),
         ];
-        assert_eq!(next_window_after(&two, 10_000, 1, 20_000, 1_000), 23_000);
-        assert_eq!(next_window_after(&two, 10_000, 1, 23_000, 5_000), 30_000);
+        assert_eq!(
+            next_window_after(&two, 10_000, (1, 0), 20_000, 1_000),
+            23_000
+        );
+        assert_eq!(
+            next_window_after(&two, 10_000, (1, 0), 23_000, 5_000),
+            30_000
+        );
         // Same lengths: the earlier candidate.
         let same = [window(0, 1_000, 1), window(5_000, 1_000, 1)];
-        assert_eq!(next_window_after(&same, 10_000, 1, 25_000, 1_000), 30_000);
+        assert_eq!(
+            next_window_after(&same, 10_000, (1, 0), 25_000, 1_000),
+            30_000
+        );
         // A window the schedule does not have: its end.
-        assert_eq!(next_window_after(&one, 5_000_000, 3, 7_000, 1_000), 8_000);
+        assert_eq!(
+            next_window_after(&one, 5_000_000, (3, 0), 7_000, 1_000),
+            8_000
+        );
+    }
+
+    #[test]
+    fn only_the_windows_of_its_cpu_follow() {
+        // TP1 on CPU 0 at 0 and on CPU 1 at 2 us (overlapping CPU 0's TP2 window), TP1
+        // again on CPU 0 at 5 us.
+        let on = |cpu, w: Window| Window { cpu, ..w };
+        let windows = [
+            window(0, 1_000, 1),
+            window(1_000, 3_000, 2),
+            on(1, window(2_000, 1_000, 1)),
+            window(5_000, 1_000, 1),
+        ];
+        // CPU 0's TP1 window at 20 us: its next is at 25 us, not CPU 1's at 22 us.
+        assert_eq!(
+            next_window_after(&windows, 10_000, (1, 0), 20_000, 1_000),
+            25_000
+        );
+        // CPU 1's only TP1 window at 22 us: the next frame's, at 32 us.
+        assert_eq!(
+            next_window_after(&windows, 10_000, (1, 1), 22_000, 1_000),
+            32_000
+        );
     }
 
     #[test]

@@ -33,11 +33,39 @@
 //! Nothing cancels a job: a partition without a task cannot fault or ask for anything, and a
 //! module shutdown halts at once, whatever the worker is building.
 //!
+//! On a machine of several CPUs syssw's server thread runs on [`SYSSW_CPU`] and the worker
+//! moves to the restarted partition's CPU with its time partition ([`worker_place`]), so a
+//! restart costs that partition's windows on its own CPU, as on one CPU.
+//!
 //! This module must never make a system call: the glue (`syssw/src/server.rs`,
 //! `syssw/src/restart.rs`) moves the messages.
 
-use config::model::MAX_PARTITIONS;
+use config::binary::PartitionView;
+use config::model::{MAX_PARTITIONS, SYSSW_PRIORITY};
 use protocol::StartCondition;
+
+/// The CPU syssw's server thread and restart worker run on: the boot CPU, where the root
+/// task starts. From there they serve the partitions of every CPU.
+pub const SYSSW_CPU: u8 = 0;
+
+/// Whether the worker runs a restart of `p` in `p`'s own windows: `p` has windows. Only
+/// then is the old task left for the worker to kill first thing in the partition's window;
+/// otherwise the server stops it at once.
+pub fn in_own_windows(p: &PartitionView) -> bool {
+    p.time_partition != 0
+}
+
+/// Where the worker runs the restart of `p`: (CPU, time partition, priority). On `p`'s CPU
+/// and in its time partition, so that its windows pay for the reload: at
+/// [`SYSSW_PRIORITY`] there (above every thread of the partition it may have to kill,
+/// below the server), or for a background partition at its priority (it competes for its
+/// CPU's background as the partition itself would).
+pub fn worker_place(p: &PartitionView) -> (u8, u8, u8) {
+    match p.time_partition {
+        0 => (p.cpu, 0, p.priority),
+        tp => (p.cpu, tp, SYSSW_PRIORITY),
+    }
+}
 
 /// How the restarted instance starts (ARINC: cold reloads the memory from the image, warm
 /// keeps it).
@@ -290,6 +318,47 @@ mod tests {
             thread: 9,
         }
     }
+
+    #[test]
+    fn the_worker_restarts_a_partition_on_its_cpu_in_its_windows() {
+        // CPU 0: a (TP1, priority 100) and b (background, 50); CPU 1: c (TP2, 120) and d
+        // (background, 60).
+        let source =
+            crate::testsys::with(&[("memory = \"512MiB\"", "cpus = 2"), ("# tail", C_AND_D)]);
+        let blob = crate::testsys::blob(&source);
+        let system = config::decode(&blob).unwrap();
+        let partition = |name| system.find_partition(name).unwrap();
+        let place = |name| worker_place(&partition(name));
+        assert_eq!(place("a"), (0, 1, SYSSW_PRIORITY));
+        assert_eq!(place("b"), (0, 0, 50));
+        assert_eq!(place("c"), (1, 2, SYSSW_PRIORITY));
+        assert_eq!(place("d"), (1, 0, 60));
+        let own = |name| in_own_windows(&partition(name));
+        assert!(own("a") && !own("b") && own("c") && !own("d"));
+    }
+
+    /// Partitions c (TP2 at 5 ms, priority 120) and d (background, 60) on CPU 1, for
+    /// `testsys::TWO`'s `# tail`.
+    const C_AND_D: &str = r#"[[schedules.windows]]
+partition = "c"
+offset = "5ms"
+duration = "2ms"
+
+[partitions.c]
+image = "app"
+memory = "1MiB"
+kernel_memory = "64KiB"
+max_priority = 120
+cpus = [1]
+
+[partitions.d]
+image = "app"
+memory = "1MiB"
+kernel_memory = "64KiB"
+max_priority = 60
+time = "background"
+cpus = [1]
+"#;
 
     #[test]
     fn a_job_waits_until_the_worker_asks() {
