@@ -80,3 +80,62 @@ fn smp_windows() {
         ],
     );
 }
+
+#[test]
+fn smp_partitions() {
+    let o = boot("smp_partitions");
+    check(
+        &o,
+        o.line("KERNEL PANIC").is_none() && o.line("panic at ").is_none(),
+        "the kernel or a partition panicked",
+    );
+    for line in [
+        "syssw: partition windows-a: TP1 on CPU 0, MCP 100, priority 100, memory ",
+        "syssw: partition windows-b: TP2 on CPU 1, MCP 100, priority 100, memory ",
+        "syssw: partition cpu0: background on CPU 0, MCP 10, priority 10, memory ",
+        "syssw: partition hog1: background on CPU 1, MCP 10, priority 10, memory ",
+        "windows-a: ran in 50 of its windows, 0 samples outside them",
+        "syssw: partition windows-b: COLD_START (HM_PARTITION_RESTART, restart 2)",
+        "hog1: spinning at 1 s",
+    ] {
+        check(&o, o.line(line).is_some(), &format!("missing {line:?}"));
+    }
+    let count = |text: &str| o.lines.iter().filter(|l| l.contains(text)).count();
+    check(
+        &o,
+        count("windows-b: ran in 50 of its windows, 0 samples outside them") >= 2,
+        "windows-b did not run in 50 of its windows on CPU 1 before and after its restart",
+    );
+    check(
+        &o,
+        count("partition=windows-b error=illegal_request") >= 2
+            && count("partition=windows-a error=illegal_request") == 1,
+        "the #UDs were not handled: windows-b twice (restarted), windows-a once (idle)",
+    );
+    // At 2 s (the schedule runs from about 0.2 s): both CPUs' time is accounted (1.8 s
+    // each, busy or idle); windows-b got 4 ms of each 10 ms frame on CPU 1 throughout,
+    // restarts included (the worker moved there pays with its windows); windows-a its 50
+    // windows of 4 ms on CPU 0 before it went idle.
+    let line = o.line("cpu0: at 2 s CPU time us ");
+    let us = |name: &str| line.and_then(|l| field(l, name));
+    let times: Vec<u64> = ["TP0=", "TP1=", "TP2=", "idle="]
+        .iter()
+        .filter_map(|n| us(n))
+        .collect();
+    eprintln!("smp_partitions accounting: {line:?}");
+    check(
+        &o,
+        times.len() == 4 && times.iter().sum::<u64>() >= 3_400_000,
+        "the CPU time and idle time at 2 s do not cover two CPUs",
+    );
+    check(
+        &o,
+        times.len() == 4 && (600_000..=800_000).contains(&times[2]),
+        "windows-b did not get about 4 ms of each 10 ms frame on CPU 1",
+    );
+    check(
+        &o,
+        times.len() == 4 && (150_000..=220_000).contains(&times[1]),
+        "windows-a did not get its 50 windows of 4 ms on CPU 0",
+    );
+}
