@@ -38,6 +38,6 @@ fn a_cpu_block_fits_its_reserved_frames() {
     const {
         assert!(BLOCK_PAGES * PAGE_SIZE >= core::mem::size_of::<CpuBlock>() as u64);
         assert!(core::mem::align_of::<CpuBlock>() as u64 <= PAGE_SIZE);
-        assert!(BLOCK_PAGES <= 16);
+        assert!(BLOCK_PAGES <= 18);
     }
 }

@@ -8,6 +8,10 @@ use crate::state::Kernel;
 use crate::table::TaskIdx;
 use abi::syscall::{Error, TaskId};
 
+/// What a CPU's `io_loaded` says when its TSS holds a bitmap that is no longer any task's
+/// (no task has this id: it is not a valid id).
+pub const IO_STALE: TaskId = TaskId(u64::MAX);
+
 /// The words of an I/O bitmap (two frames of 512 words, 64 ports a word, a clear bit
 /// grants the port) that hold ports `first..end` (`end` <= 0x10000): for each frame, the
 /// index of its first and last such word and the ports' bits in those two. Ports are
@@ -144,11 +148,13 @@ impl Kernel {
         freed
     }
 
-    /// The boot CPU's TSS must load `task`'s bitmap again before it runs (only the boot
-    /// CPU's TSS has an I/O bitmap: on the other CPUs every port is denied).
+    /// Every CPU whose TSS holds `task`'s bitmap must load a bitmap again before a thread
+    /// runs there (its own, changed, or none: [`IO_STALE`] is no task's, and a task without
+    /// ports then gets "no port" loaded, not the stale bitmap).
     fn forget_io_bitmap(&mut self, task: TaskIdx) {
-        if self.cores[0].io_loaded == self.task_id(task) {
-            self.cores[0].io_loaded = TaskId::OWN;
+        let id = self.task_id(task);
+        for core in self.cores.iter_mut().filter(|c| c.io_loaded == id) {
+            core.io_loaded = IO_STALE;
         }
     }
 }

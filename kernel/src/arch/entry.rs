@@ -23,6 +23,7 @@
 //! lock answers address-space requests meanwhile (`smp::serve_space_request`), since the
 //! holder may be waiting for that answer.
 
+use super::gdt::TssBlock;
 use super::idt::TrapFrame;
 use crate::state::Kernel;
 use crate::syscall::Outcome;
@@ -31,7 +32,6 @@ use crate::{fault, qemu, time};
 use core::arch::naked_asm;
 use core::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use spin::{Mutex, MutexGuard};
-use x86_64::structures::tss::TaskStateSegment;
 
 /// The kernel's objects. Locked once per entry ([`lock_kernel`]); never held while halting.
 pub static KERNEL: Mutex<Kernel> = Mutex::new(Kernel::new());
@@ -49,7 +49,8 @@ pub(super) struct CpuEntry {
     this: u64,
     /// The CPU's number (0: the boot CPU).
     number: u64,
-    /// Its TSS, whose ring-0 stack pointer follows the active frame.
+    /// Its TSS block, whose ring-0 stack pointer follows the active frame and whose I/O
+    /// bitmap is the running task's.
     tss: u64,
     /// A `syscall`'s user stack pointer, until the frame holds it.
     user_rsp: u64,
@@ -74,7 +75,7 @@ static mut CPU_ENTRIES: [CpuEntry; abi::machine::MAX_CPUS] = [const {
 const IA32_GS_BASE: u32 = 0xc000_0101;
 
 /// Makes entry block `cpu` this CPU's (its GS base), with its kernel stack's top and TSS.
-pub(super) fn init_cpu(cpu: usize, stack_top: u64, tss: *mut TaskStateSegment) {
+pub(super) fn init_cpu(cpu: usize, stack_top: u64, tss: *mut TssBlock) {
     // SAFETY: only the address of the block is taken.
     let block = unsafe { &raw mut CPU_ENTRIES[cpu] };
     // SAFETY: each CPU initialises its own block, once, before its first user entry; no
@@ -112,11 +113,11 @@ fn activate_frame(context: *mut TrapFrame) {
     // SAFETY: only this CPU, with interrupts off, and its stubs use its block.
     let block = unsafe { &mut *this_block() };
     block.active_frame = at;
-    let tss = block.tss as *mut TaskStateSegment;
+    let tss = block.tss as *mut TssBlock;
     let top = x86_64::VirtAddr::new_truncate(at + FRAME_SIZE as u64);
     // SAFETY: this CPU's TSS, which the CPU reads only on entries from ring 3, never while
     // the kernel runs.
-    unsafe { (*tss).privilege_stack_table[0] = top };
+    unsafe { (*tss).tss.privilege_stack_table[0] = top };
 }
 
 /// The CPUs waiting for the kernel's lock.
@@ -380,9 +381,7 @@ fn switch_to(k: &mut Kernel, next: ThreadIdx) {
             }
             k.core_mut().current = Some(next);
         }
-        if k.cpu == 0 {
-            load_io_permissions(k, k.threads[next].task());
-        }
+        load_io_permissions(k, k.threads[next].task());
         let (fs, gs) = k.threads[next].bases();
         super::fpu::set_bases(fs, gs);
         k.core_mut().reload_bases = false;
@@ -390,19 +389,21 @@ fn switch_to(k: &mut Kernel, next: ThreadIdx) {
     activate_frame(k.threads[next].context_ptr());
 }
 
-/// Puts `task`'s I/O bitmap into the boot CPU's TSS (the only one with a bitmap), copying
-/// 8 KiB only if another task's is there.
+/// Puts `task`'s I/O bitmap into this CPU's TSS, copying 8 KiB only if another task's is
+/// there.
 fn load_io_permissions(k: &mut Kernel, task: TaskIdx) {
     let id = k.task_id(task);
-    let loaded = &mut k.cores[0].io_loaded;
-    if *loaded == id {
+    if k.core().io_loaded == id {
         return;
     }
+    // SAFETY: this CPU's block, set up before its first kernel entry.
+    let tss = unsafe { (*this_block()).tss } as *mut TssBlock;
     let [lo, hi] = k.tasks[task].io_bitmap();
     if lo == 0 {
-        if *loaded != abi::syscall::TaskId::OWN {
-            super::gdt::load_io_bitmap(None);
-            *loaded = abi::syscall::TaskId::OWN;
+        if k.core().io_loaded != abi::syscall::TaskId::OWN {
+            // SAFETY: this CPU's TSS block, not borrowed elsewhere.
+            unsafe { super::gdt::load_io_bitmap(tss, None) };
+            k.core_mut().io_loaded = abi::syscall::TaskId::OWN;
         }
         return;
     }
@@ -410,8 +411,9 @@ fn load_io_permissions(k: &mut Kernel, task: TaskIdx) {
     let half = |frame: u64| unsafe {
         core::slice::from_raw_parts(crate::mem::phys_to_virt(frame) as *const u8, 4096)
     };
-    super::gdt::load_io_bitmap(Some([half(lo), half(hi)]));
-    k.cores[0].io_loaded = id;
+    // SAFETY: this CPU's TSS block, not borrowed elsewhere.
+    unsafe { super::gdt::load_io_bitmap(tss, Some([half(lo), half(hi)])) };
+    k.core_mut().io_loaded = id;
 }
 
 /// Leaves the boot path (of the boot CPU, which runs the root task first, or of an

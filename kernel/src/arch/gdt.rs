@@ -32,12 +32,12 @@ pub struct Selectors {
 /// Bytes of the I/O permission bitmap (one bit per port, 0 = allowed).
 pub const IOMAP_BYTES: usize = 8192;
 
-/// The TSS followed directly by its I/O permission bitmap (and the 0xff terminator the CPU
-/// may read past the last byte).
+/// A CPU's TSS followed directly by its I/O permission bitmap (and the 0xff terminator the
+/// CPU may read past the last byte).
 #[repr(C, align(16))]
-struct TssBlock {
-    tss: TaskStateSegment,
-    iomap: [u8; IOMAP_BYTES + 1],
+pub struct TssBlock {
+    pub tss: TaskStateSegment,
+    pub iomap: [u8; IOMAP_BYTES + 1],
 }
 
 static mut TSS_BLOCK: TssBlock = TssBlock {
@@ -46,7 +46,7 @@ static mut TSS_BLOCK: TssBlock = TssBlock {
 };
 
 /// `iomap_base` that makes the CPU deny every port (beyond the TSS limit).
-const IOMAP_DISABLED: u16 = (core::mem::size_of::<TaskStateSegment>() + IOMAP_BYTES + 1) as u16;
+pub const IOMAP_DISABLED: u16 = (core::mem::size_of::<TaskStateSegment>() + IOMAP_BYTES + 1) as u16;
 
 fn tss_block() -> *mut TssBlock {
     core::ptr::addr_of_mut!(TSS_BLOCK)
@@ -70,20 +70,21 @@ fn init_tss() {
     tss.iomap_base = IOMAP_DISABLED;
 }
 
-/// The boot CPU's TSS (the entry path points its ring-0 stack just past the running
-/// thread's saved context, `arch::entry`).
-pub fn boot_tss() -> *mut TaskStateSegment {
-    // SAFETY: only the address of the static's field is taken.
-    unsafe { &raw mut (*tss_block()).tss }
+/// The boot CPU's TSS block (the entry path points its ring-0 stack just past the running
+/// thread's saved context and loads the running task's I/O bitmap, `arch::entry`).
+pub fn boot_tss() -> *mut TssBlock {
+    tss_block()
 }
 
-/// Loads the running task's I/O permission bitmap, given as its two 4 KiB halves (`None`:
-/// no port allowed, O(1)).
-pub fn load_io_bitmap(bitmap: Option<[&[u8]; 2]>) {
-    let block = tss_block();
-    // SAFETY: the CPU reads the TSS only on privilege changes and port accesses from ring 3,
-    // never while the kernel (interrupts off) updates it; no other reference to the block
-    // lives while this one does.
+/// Loads the running task's I/O permission bitmap into this CPU's TSS `block`, given as
+/// its two 4 KiB halves (`None`: no port allowed, O(1)).
+///
+/// # Safety
+/// `block` is this CPU's TSS block, and no reference to it lives meanwhile (the CPU reads
+/// the TSS only on privilege changes and port accesses from ring 3, never while the
+/// kernel, interrupts off, updates it).
+pub unsafe fn load_io_bitmap(block: *mut TssBlock, bitmap: Option<[&[u8]; 2]>) {
+    // SAFETY: as the caller promises.
     let block = unsafe { &mut *block };
     match bitmap {
         Some([low, high]) => {
@@ -115,7 +116,8 @@ static GDT: Lazy<(GlobalDescriptorTable, Selectors)> = Lazy::new(|| {
         Descriptor::tss_segment_with_iomap(&block.tss, &block.iomap)
             .expect("bitmap directly follows the TSS"),
     );
-    load_io_bitmap(None);
+    // SAFETY: the boot CPU's block, no longer borrowed.
+    unsafe { load_io_bitmap(tss_block(), None) };
     (
         gdt,
         Selectors {

@@ -93,7 +93,7 @@ struct CpuBlock {
     efer: u64,
     lapic: u64,
     gdt: GlobalDescriptorTable,
-    tss: TaskStateSegment,
+    tss: gdt::TssBlock,
     ist: [Stack<IST_SIZE>; 3],
     stack: Stack<STACK_SIZE>,
 }
@@ -279,14 +279,17 @@ extern "sysv64" fn ap_entry(block: *mut CpuBlock) -> ! {
     let ists = [gdt::DOUBLE_FAULT_IST, gdt::NMI_IST, gdt::MACHINE_CHECK_IST];
     for (stack, ist) in b.ist.iter().zip(ists) {
         let top = stack.0.as_ptr() as u64 + IST_SIZE as u64;
-        b.tss.interrupt_stack_table[ist as usize - 1] = VirtAddr::new(top);
+        b.tss.tss.interrupt_stack_table[ist as usize - 1] = VirtAddr::new(top);
     }
     let stack_top = b.stack.0.as_ptr() as u64 + STACK_SIZE as u64;
-    b.tss.privilege_stack_table[0] = VirtAddr::new(stack_top);
-    // No I/O bitmap: every port is denied in ring 3.
-    b.tss.iomap_base = core::mem::size_of::<TaskStateSegment>() as u16;
-    // The entry path moves the TSS's ring-0 stack with the running thread, as on the boot
-    // CPU (the CPU reads the TSS only on entries from ring 3).
+    b.tss.tss.privilege_stack_table[0] = VirtAddr::new(stack_top);
+    // The descriptor checks that the bitmap follows the TSS (`iomap_base` pointing at it);
+    // every port is denied below until a task's bitmap is loaded (`entry`).
+    b.tss.iomap.fill(0xff);
+    b.tss.tss.iomap_base = core::mem::size_of::<TaskStateSegment>() as u16;
+    // The entry path moves the TSS's ring-0 stack with the running thread and loads the
+    // running task's I/O bitmap, as on the boot CPU (the CPU reads the TSS only on
+    // entries from ring 3 and port accesses there).
     let tss_at = &raw mut b.tss;
     let CpuBlock { gdt, tss, .. } = b;
     *gdt = GlobalDescriptorTable::new();
@@ -295,7 +298,12 @@ extern "sysv64" fn ap_entry(block: *mut CpuBlock) -> ! {
     let data = gdt.append(Descriptor::kernel_data_segment());
     gdt.append(Descriptor::user_data_segment());
     gdt.append(Descriptor::user_code_segment());
-    let tss = gdt.append(Descriptor::tss_segment(tss));
+    let tss = gdt.append(
+        Descriptor::tss_segment_with_iomap(&tss.tss, &tss.iomap)
+            .expect("bitmap directly follows the TSS"),
+    );
+    // SAFETY: this CPU's block; the descriptor only recorded its address.
+    unsafe { gdt::load_io_bitmap(tss_at, None) };
     let gdt: &'static GlobalDescriptorTable = gdt;
     gdt.load();
     // SAFETY: the selectors index descriptors of the GDT just loaded, with the right types

@@ -1,7 +1,6 @@
 //! `syscall`/`sysret` set-up (the entry stub itself is in [`entry`](super::entry)).
 
 use x86_64::registers::model_specific::Msr;
-use x86_64::structures::tss::TaskStateSegment;
 
 const IA32_STAR: u32 = 0xc000_0081;
 const IA32_LSTAR: u32 = 0xc000_0082;
@@ -11,7 +10,7 @@ const ENTRY_RFLAGS_MASK: u64 = (1 << 8) | (1 << 9) | (1 << 10) | (1 << 18) | (1 
 
 /// Sets up `syscall` on this CPU, entry block `cpu` with its kernel stack's top and its
 /// TSS (the entry stubs' per-CPU data, `entry::init_cpu`).
-pub fn init(cpu: usize, kernel_stack_top: u64, tss: *mut TaskStateSegment) {
+pub fn init(cpu: usize, kernel_stack_top: u64, tss: *mut super::gdt::TssBlock) {
     super::entry::init_cpu(cpu, kernel_stack_top, tss);
     let selectors = super::gdt::selectors();
     // SYSRET loads CS = STAR[63:48] + 16 and SS = STAR[63:48] + 8 (user code follows user data).
