@@ -2,7 +2,8 @@
 //! of the one major frame; a thread goes only to an online CPU, and moves only while no
 //! other CPU runs it; calls to a server on the same and on the other CPU are answered; a
 //! task killed while the other CPU runs its thread stops there, and that CPU goes on with
-//! its other threads.
+//! its other threads; a task's I/O ports work on the other CPU, and once it is killed
+//! there a task without ports cannot use them.
 //!
 //! Schedule (major frame 10 ms): CPU 0: TP1 [0, 5 ms); CPU 1: TP2 [0, 5 ms) and TP3
 //! [5, 10 ms). TP1's and TP2's windows overlap in time, which one CPU's windows may not.
@@ -27,6 +28,9 @@ const CALLS: u64 = 1000;
 
 const R_SPINS: usize = 0;
 const R_SERVED: usize = 0;
+const R_PORT: usize = 0;
+/// COM2's scratch register: what is written there reads back.
+const SCRATCH: u16 = 0x2ff;
 
 worker!(
     fn spinner(b, ipc) {
@@ -51,6 +55,31 @@ worker!(
             b.add_result(R_SERVED, 1);
             let reply = Message::new(1, [m.message.words[0] + 1, 0, 0]);
             next = sys::reply_wait(Some(m.sender), TIMEOUT_INFINITE, &reply);
+        }
+    }
+);
+
+worker!(
+    /// Writes COM2's scratch register, reads it back, then spins (step 1: done).
+    fn port_user(b, ipc) {
+        user_rt::port::outb(SCRATCH, 0x5a);
+        b.set_result(R_PORT, u64::from(user_rt::port::inb(SCRATCH)));
+        b.set_step(1);
+        loop {
+            core::hint::spin_loop();
+        }
+    }
+);
+
+worker!(
+    /// Reads COM2's scratch register without a grant (step 1 before, 2 after: a #GP kills
+    /// it in between).
+    fn port_thief(b, ipc) {
+        b.set_step(1);
+        b.set_result(R_PORT, u64::from(user_rt::port::inb(SCRATCH)));
+        b.set_step(2);
+        loop {
+            sys::sleep(MAJOR);
         }
     }
 );
@@ -191,6 +220,40 @@ pub fn run() {
         "the other CPU goes on with TP3 after the kill",
         spinners[2].block.result(R_SPINS) > tp3,
     );
+    ports_on_the_other_cpu(&mut lab);
     println!("all smp checks passed");
     let _ = sys::system_halt(true);
+}
+
+/// A task granted COM2's ports uses them on CPU 1 (its bitmap in CPU 1's TSS) and is killed
+/// while it runs there; then a task without ports tries one on CPU 1: it faults.
+fn ports_on_the_other_cpu(lab: &mut Lab) {
+    let owner = lab.task("ports", BASIC, SERVER_PRIORITY);
+    must("io_grant of COM2's ports", sys::io_grant(owner, 0x2f8, 8));
+    let user = lab.worker(Some(owner), port_user, SERVER_PRIORITY, &[]);
+    let thief_task = lab.task("thief", BASIC, SERVER_PRIORITY);
+    let thief = lab.worker(Some(thief_task), port_thief, SERVER_PRIORITY, &[]);
+    for w in [user.id, thief.id] {
+        must(
+            "thread_set Cpu 1",
+            sys::thread_set(Some(w), ThreadAttribute::Cpu, 1),
+        );
+    }
+    user.start();
+    user.wait_step(1, "the port user on CPU 1 reads its port");
+    expect_eq(
+        "a task's granted port works on the other CPU",
+        user.block.result(R_PORT),
+        0x5a,
+    );
+    sys::sleep(MS);
+    must("task_kill of the port user", sys::task_kill(owner));
+    thief.start();
+    thief.wait_step(1, "the thief on CPU 1 starts");
+    sys::sleep(10 * MS);
+    expect_eq(
+        "a task without ports cannot use those of a task killed on that CPU (#GP)",
+        thief.block.step(),
+        1,
+    );
 }
