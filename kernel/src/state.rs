@@ -76,9 +76,8 @@ pub struct Kernel {
     pub(crate) next_deadline: u64,
     /// Schedules of time windows.
     pub(crate) time: TimeTable,
-    /// CPU time per time partition and time with nothing to run (all CPUs), in TSC ticks.
+    /// CPU time per time partition (all CPUs), in TSC ticks.
     pub(crate) cpu_ticks: [u64; TIME_PARTITIONS],
-    pub(crate) idle_ticks: u64,
     /// Interrupt lines attached to threads.
     pub(crate) irqs: crate::irq::Irqs,
     /// The IOMMU, when the machine has one the kernel programs (translation on).
@@ -105,6 +104,8 @@ pub struct Core {
     /// Time partition of the thread that ran since `last_account` (None: idle).
     pub running_partition: Option<u8>,
     pub last_account: u64,
+    /// Its time with nothing to run, in TSC ticks.
+    pub idle_ticks: u64,
     /// The task whose I/O bitmap is in its TSS ([`TaskId::OWN`]: ports disabled).
     pub io_loaded: TaskId,
     /// An interrupt was sent to make it look at its state again, not taken yet.
@@ -121,6 +122,7 @@ impl Core {
         reload_bases: false,
         running_partition: None,
         last_account: 0,
+        idle_ticks: 0,
         io_loaded: TaskId::OWN,
         kicked: false,
     };
@@ -166,7 +168,6 @@ impl Kernel {
             next_deadline: NEVER,
             time: TimeTable::new(),
             cpu_ticks: [0; TIME_PARTITIONS],
-            idle_ticks: 0,
             irqs: crate::irq::Irqs::new(),
             dma: None,
         }

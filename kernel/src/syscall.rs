@@ -689,7 +689,7 @@ fn partition_info(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, clock: Clock) -> Ha
     let ns = |ticks| crate::time::ticks_to_ns(ticks, crate::time::tsc_hz());
     let (cpu, idle, frames) = (
         ns(k.cpu_ticks[tp as usize]),
-        ns(k.idle_ticks),
+        ns(k.core().idle_ticks),
         k.time.frames,
     );
     let info = results::PartitionInfo {

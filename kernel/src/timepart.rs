@@ -293,12 +293,12 @@ impl Kernel {
     /// Charges the entering CPU's time since its last call (TSC `now`) to the partition
     /// that ran there, or idle.
     pub fn account(&mut self, now: u64) {
-        let core = self.core_mut();
+        let core = &mut self.cores[self.cpu];
         let delta = now.saturating_sub(core.last_account);
         core.last_account = now;
         match core.running_partition {
             Some(p) => self.cpu_ticks[p as usize] += delta,
-            None => self.idle_ticks += delta,
+            None => core.idle_ticks += delta,
         }
     }
 }

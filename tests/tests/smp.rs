@@ -118,8 +118,9 @@ fn smp_partitions() {
             && count("partition=windows-a error=illegal_request") == 1,
         "the #UDs were not handled: windows-b twice (restarted), windows-a once (idle)",
     );
-    // At 2 s (the schedule runs from about 0.2 s): both CPUs' time is accounted (1.8 s
-    // each, busy or idle); windows-b got 4 ms of each 10 ms frame on CPU 1 throughout,
+    // At 2 s (the schedule runs from about 0.2 s): both CPUs' time is accounted, about
+    // 1.8 s each (CPU 0's busy or idle, which cpu0 reads for its own CPU; CPU 1's busy,
+    // hog1 leaves it no idle time); windows-b got 4 ms of each 10 ms frame on CPU 1 throughout,
     // restarts included (the worker moved there pays with its windows); windows-a its 50
     // windows of 4 ms on CPU 0 before it went idle.
     let line = o.line("cpu0: at 2 s CPU time us ");

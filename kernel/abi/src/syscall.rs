@@ -263,8 +263,8 @@ codes::code_enum! {
         /// `partition_info(tp) -> rdi = active time partition of the caller's CPU (0 in a
         /// gap or without a schedule), rsi = start of tp's current or next window on any CPU
         /// (ns since boot; u64::MAX if it has none), rdx = that window's length
-        /// (ns), r10 = CPU time threads of tp used on all CPUs (ns), r8 = time the CPUs were
-        /// idle, summed (ns), r9 = major frames started`. Ability: none. Errors:
+        /// (ns), r10 = CPU time threads of tp used on all CPUs (ns), r8 = time the caller's CPU
+        /// was idle (ns), r9 = major frames started`. Ability: none. Errors:
         /// `InvalidArgument` (tp out of range).
         PartitionInfo = 72 => "partition_info",
 

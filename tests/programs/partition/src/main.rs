@@ -10,7 +10,7 @@
 //! * `hog*`: spins without ever blocking (a CPU hog at its priority) and prints its CPU time
 //!   once a second;
 //! * `cpu*`: prints the CPU time of time partitions 0..=4 (0 is the background) and the
-//!   time the CPU was idle once a second: `<name>: at <s> s CPU time us TP0=<us> TP1=<us>
+//!   time its CPU was idle once a second: `<name>: at <s> s CPU time us TP0=<us> TP1=<us>
 //!   TP2=<us> TP3=<us> TP4=<us> idle=<us>`;
 //! * anything else: prints a heartbeat with its CPU time once a second.
 #![no_std]
