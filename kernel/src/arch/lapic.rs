@@ -137,10 +137,6 @@ pub fn set_timer_hz(hz: u64) {
     TIMER_HZ.store(hz, Ordering::Relaxed);
 }
 
-pub fn timer_hz() -> u64 {
-    TIMER_HZ.load(Ordering::Relaxed)
-}
-
 /// One timer interrupt at `deadline` (ns since boot; `u64::MAX` = none). A deadline beyond
 /// the counter's range fires early; the handler then simply programs the rest.
 pub fn one_shot_at(deadline: u64) {

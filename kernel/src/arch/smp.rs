@@ -154,9 +154,9 @@ pub fn start_application_processors(
             .iter()
             .filter(|&&a| u32::from(a) != boot_apic)
     };
-    let (pml4, _) = Cr3::read();
-    KERNEL_SPACE.store(pml4.start_address().as_u64(), Ordering::Relaxed);
-    LOADED_SPACE[0].store(pml4.start_address().as_u64(), Ordering::Relaxed);
+    let pml4 = Cr3::read().0.start_address().as_u64();
+    KERNEL_SPACE.store(pml4, Ordering::Relaxed);
+    LOADED_SPACE[0].store(pml4, Ordering::Relaxed);
     APIC_IDS[0].store(boot_apic as u8, Ordering::Relaxed);
     if aps().next().is_none() {
         return 1;
@@ -169,8 +169,6 @@ pub fn start_application_processors(
     let end = &raw const ap_trampoline_end as usize;
     // SAFETY: the trampoline's bytes lie between its two symbols in the kernel's text.
     let code = unsafe { core::slice::from_raw_parts(start as *const u8, end - start) };
-    let (pml4, _) = Cr3::read();
-    let pml4 = pml4.start_address().as_u64();
     // SAFETY: the live top-level table, through the direct map; only read.
     let kernel_half = unsafe { core::slice::from_raw_parts(phys_to_virt(pml4) as *const u64, 512) };
     let low_len = (LOW_PAGES * PAGE_SIZE) as usize;
