@@ -185,8 +185,8 @@ fn plc_guest_system() {
     );
 }
 
-/// The two-CPU example of the scenarios' systems: on each CPU a window at the same offset
-/// and a background partition.
+/// The two-CPU example of the scenarios' systems: on each CPU a window (overlapping the
+/// other's in part) and background partitions.
 #[test]
 fn smp_partitions_system() {
     let path =
@@ -204,7 +204,8 @@ fn smp_partitions_system() {
             ("windows-a", 0, 1),
             ("windows-b", 1, 2),
             ("cpu0", 0, 0),
-            ("hog1", 1, 0)
+            ("hog1", 1, 0),
+            ("hog0", 0, 0)
         ]
     );
     let windows: Vec<(u64, u8, u8)> = s.schedules[0]
@@ -212,7 +213,7 @@ fn smp_partitions_system() {
         .iter()
         .map(|w| (w.offset, w.cpu, w.time_partition))
         .collect();
-    assert_eq!(windows, [(0, 0, 1), (0, 1, 2)]);
+    assert_eq!(windows, [(0, 0, 1), (2_000_000, 1, 2)]);
     let blob = config::binary::encode(&s);
     let view = config::decode(&blob).expect("the encoded form decodes");
     assert_eq!(System::from_view(&view), s);
@@ -238,10 +239,10 @@ fn smp_partitions_system() {
     );
     common::expect_one(
         &one_cpu,
-        "\"0ms\"",
-        1,
+        "\"2ms\"",
+        0,
         "schedules[0].windows[1].offset",
-        "the window 0ns..4ms overlaps window 0 (0ns..4ms), both on CPU 0 (the windows of one CPU must not overlap; those of different CPUs may)",
+        "the window 2ms..6ms overlaps window 0 (0ns..4ms), both on CPU 0 (the windows of one CPU must not overlap; those of different CPUs may)",
     );
     // windows-b's window on CPU 0 while windows-b runs on CPU 1.
     let elsewhere = common::edit(&source, &[("cpu = 1\n", "cpu = 0\n")]);

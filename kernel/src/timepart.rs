@@ -14,6 +14,7 @@
 
 use crate::sched::TIME_PARTITIONS;
 use crate::state::Kernel;
+use crate::thread::NEVER;
 use abi::syscall::MIN_WINDOW;
 
 pub const MAX_WINDOWS: usize = abi::syscall::MAX_WINDOWS as usize;
@@ -257,17 +258,24 @@ impl Kernel {
         // The one-shot timer has fired: re-arm it even if it fired a little early (its
         // count is rounded down) and nothing is due yet, or the next event would be missed.
         self.core_mut().timer_dirty = true;
+        self.catch_up(now);
+        // Another CPU whose boundary has passed too is interrupted (`cpus_to_kick`), so
+        // that all switch together even when its own timer comes late (under QEMU's
+        // -icount a CPU takes an interrupt only in its turn, see `next_event`).
+        for core in self.cores[..self.online].iter_mut() {
+            core.timer_dirty |= now >= core.next_boundary;
+        }
+    }
+
+    /// Brings the entering CPU's window and the time-outs up to `now`: before it chooses a
+    /// thread, whatever interrupt it did or did not take (another CPU may have woken a
+    /// thread of a window that has just ended here, before this CPU's timer said so).
+    pub fn catch_up(&mut self, now: u64) {
         if now >= self.next_deadline {
             self.expire_timeouts(now);
         }
         if now >= self.core().next_boundary {
             self.update_window(self.cpu, now);
-        }
-        // Another CPU whose boundary has passed too is interrupted (`cpus_to_kick`), so
-        // that all switch together even when its own timer comes late (QEMU's -icount
-        // delays a halted CPU's timer that expires at the instant the running one's does).
-        for core in self.cores[..self.online].iter_mut() {
-            core.timer_dirty |= now >= core.next_boundary;
         }
     }
 
@@ -280,10 +288,22 @@ impl Kernel {
         core.timer_dirty = true;
     }
 
-    /// When the entering CPU's timer must fire next: its next window boundary, and on the
-    /// boot CPU, which serves every time-out, the earliest time-out too.
-    pub fn next_event(&self) -> u64 {
-        let boundary = self.core().next_boundary;
+    /// When the entering CPU's timer must fire next: the next window boundary of any CPU,
+    /// and on the boot CPU, which serves every time-out, the earliest time-out too.
+    ///
+    /// Every CPU's timer fires at every CPU's boundaries, and the first CPU to take the
+    /// interrupt interrupts those whose boundary passed ([`Kernel::on_timer`]). A CPU
+    /// waking only at its own boundaries would, under QEMU's deterministic time, take its
+    /// interrupt only when the CPU whose turn it is ends it: for as long as half the time
+    /// to the next timer anywhere, a window lost. On hardware it costs an interrupt per
+    /// boundary per CPU.
+    pub fn next_event(&self, now: u64) -> u64 {
+        // Another CPU's boundary that has passed was seen (that CPU was interrupted).
+        let boundary = (self.cores[..self.online].iter().enumerate())
+            .filter(|&(cpu, core)| cpu == self.cpu || core.next_boundary > now)
+            .map(|(_, core)| core.next_boundary)
+            .min()
+            .unwrap_or(NEVER);
         match self.cpu {
             0 => self.next_deadline.min(boundary),
             _ => boundary,

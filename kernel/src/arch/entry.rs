@@ -281,7 +281,7 @@ fn on_interrupt(from_user: bool, event: impl FnOnce(&mut Kernel)) {
 fn program_timer(k: &mut Kernel) {
     if k.core().timer_dirty {
         k.core_mut().timer_dirty = false;
-        super::lapic::one_shot_at(k.next_event());
+        super::lapic::one_shot_at(k.next_event(time::since_boot_ns()));
     }
 }
 
@@ -334,6 +334,7 @@ fn finish(mut k: Locked, outcome: Outcome) {
         if chosen.is_none() {
             // What the log holds goes out as far as the UART takes it without waiting.
             crate::log::drain();
+            k.catch_up(time::since_boot_ns());
             program_timer(&mut k);
             chosen = k.choose();
         }
@@ -354,7 +355,7 @@ fn finish(mut k: Locked, outcome: Outcome) {
         }
         kick_others(&mut k);
         #[cfg(feature = "test-hooks")]
-        if k.cpu == 0 && k.next_event() == crate::thread::NEVER {
+        if k.cpu == 0 && k.next_event(0) == crate::thread::NEVER {
             crate::test_hooks::on_idle();
         }
         drop(k);
