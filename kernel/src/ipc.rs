@@ -123,6 +123,8 @@ impl Kernel {
             if !waiting || !self.may_send(me.task(), them.task()) {
                 return None;
             }
+            self.follow(peer, t);
+            let (me, them) = (&self.threads[t], &self.threads[peer]);
             let direct = them.priority() > me.priority()
                 && them.cpu() == me.cpu()
                 && (them.time_partition() == me.time_partition() || them.time_partition() == 0);
@@ -238,6 +240,7 @@ impl Kernel {
         {
             match self.deliver(t, dest) {
                 Ok(()) => {
+                    self.follow(dest, t);
                     self.wake(dest, Error::Ok);
                     self.after_delivery(t, dest, call, deadline);
                     return;
@@ -282,6 +285,7 @@ impl Kernel {
             match self.deliver(s, t) {
                 Ok(()) => {
                     self.unqueue_sender(t, s);
+                    self.follow(t, s);
                     let call = matches!(self.threads[s].state(), State::Sending { call: true, .. });
                     let s_deadline = self.threads[s].deadline();
                     self.after_delivery(s, t, call, s_deadline);

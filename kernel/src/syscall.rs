@@ -811,5 +811,10 @@ fn set_attribute(
             k.require(caller_task, Abilities::SCHEDULING)?;
             k.set_cpu(target, value)
         }
+        ThreadAttribute::FollowsCallers => {
+            k.require(caller_task, Abilities::SCHEDULING)?;
+            k.threads[target].follows_callers = value != 0;
+            Ok(())
+        }
     }
 }

@@ -94,6 +94,8 @@ pub struct Thread {
     time_partition: u8,
     /// The CPU it runs on.
     cpu: u8,
+    /// It moves to the CPU of each sender whose message it takes ([`Kernel::follow`]).
+    pub follows_callers: bool,
     suspended: bool,
     /// User registers while the thread is not running (the live copy is the entry frame).
     context: TrapFrame,
@@ -123,6 +125,7 @@ impl Thread {
         priority: 0,
         time_partition: 0,
         cpu: 0,
+        follows_callers: false,
         suspended: false,
         context: TrapFrame::ZERO,
         fs_base: 0,
@@ -464,6 +467,7 @@ impl Kernel {
             priority,
             time_partition,
             cpu: self.cpu as u8,
+            follows_callers: false,
             context: TrapFrame {
                 rip: entry,
                 rsp: stack,
@@ -573,6 +577,14 @@ impl Kernel {
         self.threads[t].cpu = cpu as u8;
         self.requeue(t);
         Ok(())
+    }
+
+    /// A receiver that follows its callers moves to `sender`'s CPU (if it may).
+    pub fn follow(&mut self, receiver: ThreadIdx, sender: ThreadIdx) {
+        let cpu = self.threads[sender].cpu;
+        if self.threads[receiver].follows_callers && self.threads[receiver].cpu != cpu {
+            let _ = self.set_cpu(receiver, cpu as u64);
+        }
     }
 
     pub fn set_time_partition(&mut self, t: ThreadIdx, partition: u8) -> Result<(), Error> {

@@ -75,6 +75,7 @@ fn smp_windows() {
             "every call on the same CPU got its answer",
             "every call across CPUs got its answer",
             "the server counted every call",
+            "every call was answered on the caller's CPU (CPU 0: TP0 or TP1 active)",
             "the killed spinner ran no more on the other CPU",
             "the other CPU goes on with TP3 after the kill",
             "a task's granted port works on the other CPU",

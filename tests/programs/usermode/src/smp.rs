@@ -1,7 +1,7 @@
 //! Two CPUs (mode `smp`, `-smp 2`): each CPU runs the threads put on it, in its own windows
 //! of the one major frame; a thread goes only to an online CPU, and moves only while no
-//! other CPU runs it; calls to a server on the same and on the other CPU are answered; a
-//! task killed while the other CPU runs its thread stops there, and that CPU goes on with
+//! other CPU runs it; calls to a server on the same and on the other CPU are answered, and
+//! a server that follows its callers answers on the caller's CPU; a task killed while the other CPU runs its thread stops there, and that CPU goes on with
 //! its other threads; a task's I/O ports work on the other CPU, and once it is killed
 //! there a task without ports cannot use them.
 //!
@@ -42,7 +42,9 @@ worker!(
 );
 
 worker!(
-    /// Answers each call with its first word plus one.
+    /// Answers each call with its first word plus one and, if its second word is 1, the
+    /// time partition active on the CPU it answers on (CPU 0's are 0 and 1, CPU 1's 2
+    /// and 3).
     fn server(b, ipc) {
         let mut next = sys::receive(None, TIMEOUT_INFINITE);
         loop {
@@ -53,7 +55,11 @@ worker!(
                 }
             };
             b.add_result(R_SERVED, 1);
-            let reply = Message::new(1, [m.message.words[0] + 1, 0, 0]);
+            let active = match m.message.words[1] {
+                1 => sys::partition_info(0).map_or(u64::MAX, |info| info.active),
+                _ => 0,
+            };
+            let reply = Message::new(1, [m.message.words[0] + 1, active, 0]);
             next = sys::reply_wait(Some(m.sender), TIMEOUT_INFINITE, &reply);
         }
     }
@@ -202,6 +208,28 @@ pub fn run() {
         "the server counted every call",
         server.block.result(R_SERVED),
         2 * CALLS,
+    );
+
+    // A server that follows its callers, waiting on CPU 1, answers a call from CPU 0 on
+    // CPU 0 (in CPU 0's time), and stays there.
+    must(
+        "thread_set FollowsCallers of the server",
+        sys::thread_set(Some(server.id), ThreadAttribute::FollowsCallers, 1),
+    );
+    let mut answered_on = [0u64; 4];
+    for n in 0..100 {
+        let r = sys::ipc_call(server.id, WAIT, &Message::new(1, [n, 1, 0]));
+        let active = r.map_or(u64::MAX, |r| r.message.words[1]);
+        answered_on[(active as usize).min(3)] += 1;
+    }
+    expect_eq(
+        "every call was answered on the caller's CPU (CPU 0: TP0 or TP1 active)",
+        answered_on[0] + answered_on[1],
+        100,
+    );
+    must(
+        "thread_set FollowsCallers 0",
+        sys::thread_set(Some(server.id), ThreadAttribute::FollowsCallers, 0),
     );
 
     // Kill TP2's task while CPU 1 runs its spinner (inside TP2's window).
