@@ -172,8 +172,8 @@ fn main(image_base: u64, image_len: u64) {
         sys::schedule_switch(0).unwrap_or_else(|e| reject(format_args!("schedule_switch: {e:?}")));
     }
     // The server thread stays in TP0 above every other thread: it only runs to serve
-    // requests and faults. It stays on the boot CPU (CPU 0), where syssw starts, and
-    // serves the partitions of every CPU from there.
+    // requests and faults. It follows its callers from CPU to CPU, so that serving a
+    // partition takes that partition's CPU's time, never another CPU's.
     sys::set_health_monitor(me).unwrap_or_else(|e| reject(format_args!("health monitor: {e:?}")));
     let _ = sys::thread_set(None, ThreadAttribute::TimePartition, 0);
     sys::thread_set(
@@ -182,6 +182,8 @@ fn main(image_base: u64, image_len: u64) {
         restart::SERVER_PRIORITY as u64,
     )
     .unwrap_or_else(|e| reject(format_args!("server priority: {e:?}")));
+    sys::thread_set(None, ThreadAttribute::FollowsCallers, 1)
+        .unwrap_or_else(|e| reject(format_args!("server follows its callers: {e:?}")));
     // The worker first asks for a job: it runs when this thread first waits for requests.
     sys::thread_start(worker.id)
         .unwrap_or_else(|e| reject(format_args!("thread_start of the restart worker: {e:?}")));

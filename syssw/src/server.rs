@@ -3,13 +3,13 @@
 //! application messages) and the kernel's fault reports, and carries out the
 //! health monitor's decisions (stop, cold/warm restart, module shutdown).
 //!
-//! It runs in time partition 0 above every other thread (`crate::restart::SERVER_PRIORITY`),
-//! so a request is served at once, inside the caller's window, and it never does anything
-//! slow. A windowed partition's fault report or REPORT_ERROR that comes too near the end of
-//! its window is handled at the start of its next window instead (`syssw_core::deferred`;
-//! an action that stops the partition stops its task at once), so that the handling never
-//! runs into the next partition's window (on its own CPU, CPU 0: the reports of a
-//! partition bound to another CPU are handled at once, see `syssw_core::deferred`).
+//! It runs in time partition 0 above every other thread (`crate::restart::SERVER_PRIORITY`)
+//! and follows its callers from CPU to CPU (`ThreadAttribute::FollowsCallers`), so a
+//! request is served at once, inside the caller's window on the caller's CPU, and it never
+//! does anything slow. A windowed partition's fault report or REPORT_ERROR that comes too
+//! near the end of its window is handled at the start of its next window instead
+//! (`syssw_core::deferred`; an action that stops the partition stops its task at once), so
+//! that the handling never runs into the next partition's window.
 //! Restarts: a restart's quick part (forget the old task, reset its ports) is done here at
 //! once, the rest (kill the old task, print the health line, reload, zero and map the
 //! memory, create the task and its first thread) by the restart worker (`crate::restart`)
@@ -46,7 +46,7 @@ use syssw_core::health::{
 };
 use syssw_core::mode::{ModeChange, OperatingMode, PartitionMode, StartCondition};
 use syssw_core::ports::{Completion, NEVER, Outcome, Ports, Waiter};
-use syssw_core::restart::{Job, Kind, Report, Restarts, SYSSW_CPU, in_own_windows, worker_place};
+use syssw_core::restart::{Job, Kind, Report, Restarts, in_own_windows, worker_place};
 use syssw_core::schedule::ModuleSchedule;
 use syssw_core::staging::Staging;
 use user_rt::abi::ipc::{LABEL_FAULT_REPORT, MessageTag, REPLY_KILL};
@@ -745,9 +745,7 @@ impl<'a> Server<'a> {
     /// (first thing in its next window, above every thread of it). Handled at once: a
     /// background partition's reports, a module shutdown, a restart the worker can start at
     /// once (the server only forgets the task and queues the job), a report the full queue
-    /// refuses, the report of a partition bound to another CPU than this thread's (its
-    /// windows are not this CPU's: this thread's work takes time from this CPU's window
-    /// whenever it is done).
+    /// refuses.
     fn defer(&mut self, report: deferred::Report) -> bool {
         let index = report.partition;
         let p = self.system.partition(index);
@@ -760,7 +758,6 @@ impl<'a> Server<'a> {
             HealthAction::ColdRestart | HealthAction::WarmRestart
         ) && self.restarts.worker_idle();
         if tp == 0
-            || p.cpu != SYSSW_CPU
             || quick_restart
             || matches!(
                 action,
@@ -833,6 +830,11 @@ impl<'a> Server<'a> {
             let Some((start, length)) = self.window_of(index, tp, now) else {
                 continue;
             };
+            // The work runs in the partition's window on its CPU, where this thread moves
+            // (it stays there until a caller elsewhere takes it along).
+            if deferred::fits(start, length, now) {
+                let _ = sys::thread_set(None, ThreadAttribute::Cpu, p.cpu as u64);
+            }
             while deferred::fits(start, length, now) {
                 let Some(report) = self.deferred.take(index) else {
                     break;

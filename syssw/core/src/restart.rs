@@ -33,9 +33,10 @@
 //! Nothing cancels a job: a partition without a task cannot fault or ask for anything, and a
 //! module shutdown halts at once, whatever the worker is building.
 //!
-//! On a machine of several CPUs syssw's server thread runs on [`SYSSW_CPU`] and the worker
-//! moves to the restarted partition's CPU with its time partition ([`worker_place`]), so a
-//! restart costs that partition's windows on its own CPU, as on one CPU.
+//! On a machine of several CPUs syssw's server thread runs on the CPU of the partition it
+//! serves (it follows its callers) and the worker moves to the restarted partition's CPU
+//! with its time partition ([`worker_place`]), so a restart costs that partition's windows
+//! on its own CPU, as on one CPU.
 //!
 //! This module must never make a system call: the glue (`syssw/src/server.rs`,
 //! `syssw/src/restart.rs`) moves the messages.
@@ -43,10 +44,6 @@
 use config::binary::PartitionView;
 use config::model::{MAX_PARTITIONS, SYSSW_PRIORITY};
 use protocol::StartCondition;
-
-/// The CPU syssw's server thread and restart worker run on: the boot CPU, where the root
-/// task starts. From there they serve the partitions of every CPU.
-pub const SYSSW_CPU: u8 = 0;
 
 /// Whether the worker runs a restart of `p` in `p`'s own windows: `p` has windows. Only
 /// then is the old task left for the worker to kill first thing in the partition's window;
