@@ -707,11 +707,32 @@ fn plc_watchdog() {
 
 #[test]
 fn plc_shared() {
-    let o = boot("plc_shared");
-    check(&o, o.line("panic at ").is_none(), "a partition panicked");
-    check(&o, o.line("KERNEL PANIC").is_none(), "the kernel panicked");
+    shared_globals_kept(&boot("plc_shared"), false);
+}
+
+/// The projects of `plc_shared` on two CPUs, their windows at the same time: what the
+/// reader takes is never torn or older although the writer's updates run truly
+/// concurrently with its copies (QEMU on real time runs each CPU on a host thread).
+#[test]
+fn smp_shared_plc() {
+    let o = boot("smp_shared_plc");
+    for line in [
+        "syssw: partition writer: TP1 on CPU 0, ",
+        "syssw: partition reader: TP2 on CPU 1, ",
+    ] {
+        check(&o, o.line(line).is_some(), &format!("missing {line:?}"));
+    }
+    shared_globals_kept(&o, true);
+}
+
+/// The checks of `plc_shared` and `smp_shared_plc`. `concurrent`: the two windows overlap
+/// on real time, so a cycle of either may come late and the sequence may advance by more
+/// or less than one per record (never backwards).
+fn shared_globals_kept(o: &xtask::qemu::Outcome, concurrent: bool) {
+    check(o, o.line("panic at ").is_none(), "a partition panicked");
+    check(o, o.line("KERNEL PANIC").is_none(), "the kernel panicked");
     check(
-        &o,
+        o,
         o.succeeded(),
         "expected success exit (33): the stopwatch ends the run",
     );
@@ -719,12 +740,12 @@ fn plc_shared() {
         let start = format!(
             "[{partition}] plc: shared globals: {written} written, {read} read through the segment at 0x"
         );
-        check(&o, o.line(&start).is_some(), &format!("no `{start}` line"));
+        check(o, o.line(&start).is_some(), &format!("no `{start}` line"));
     }
     let writer = watch_lines(&o.lines, "writer");
     let reader = watch_lines(&o.lines, "reader");
     check(
-        &o,
+        o,
         writer.len() >= 2 && reader.len() >= 2,
         &format!(
             "{} writer and {} reader watch lines (one a second)",
@@ -732,13 +753,22 @@ fn plc_shared() {
             reader.len()
         ),
     );
+    // A stale cycle (the previous values kept, flagged) is one whose copy-in met an update
+    // in progress for longer than the reader waits: with the two projects on two CPUs on
+    // real time, the host descheduling the writer's CPU in the middle of an update. Delayed,
+    // never wrong: at most one cycle in a thousand. Torn or older records: never.
+    let stale_allowed = |records: Option<u64>| match concurrent {
+        true => records.unwrap_or(0) / 1_000,
+        false => 0,
+    };
     for (t, values) in &reader {
         let field = |name| value(values, name);
         check(
-            &o,
+            o,
             field("Reader.torn") == Some(0)
                 && field("Reader.backwards") == Some(0)
-                && field("Reader.stale") == Some(0),
+                && field("Reader.stale")
+                    .is_some_and(|n| n <= stale_allowed(field("Reader.records"))),
             &format!("t={t}ms: torn, out-of-order or stale records taken: {values:?}"),
         );
     }
@@ -752,20 +782,33 @@ fn plc_shared() {
     let records = value(last_reader, "Reader.records").unwrap_or(0);
     let advanced = value(last_reader, "Reader.advanced").unwrap_or(0);
     let cycles = value(last_writer, "Writer.cycles").unwrap_or(0);
-    check(
-        &o,
-        records >= 1_000 && (advanced + 1 == records || advanced + 2 == records),
-        &format!("the reader saw {records} records, the sequence advanced by {advanced}"),
+    eprintln!(
+        "shared globals: {records} records, the sequence advanced by {advanced}, {cycles} writer cycles"
     );
-    check(
-        &o,
-        advanced + 10 >= cycles && advanced <= cycles + 10,
-        &format!(
-            "the sequence advanced by {advanced} for the reader while the writer ran {cycles} cycles"
-        ),
-    );
-    // The copy-ins found a new update each cycle (never a stale one: the windows do not
-    // overlap, so the writer always finishes its update first).
+    if concurrent {
+        // On real time either project may miss a cycle, and the two print their values at
+        // different instants: the sequence advanced, about one per record.
+        check(
+            o,
+            records >= 1_000 && advanced >= records / 2 && advanced <= 2 * records,
+            &format!("the reader saw {records} records, the sequence advanced by {advanced}"),
+        );
+    } else {
+        check(
+            o,
+            records >= 1_000 && (advanced + 1 == records || advanced + 2 == records),
+            &format!("the reader saw {records} records, the sequence advanced by {advanced}"),
+        );
+        check(
+            o,
+            advanced + 10 >= cycles && advanced <= cycles + 10,
+            &format!(
+                "the sequence advanced by {advanced} for the reader while the writer ran {cycles} cycles"
+            ),
+        );
+    }
+    // The copy-ins found a new update each cycle (on one CPU never a stale one: the windows
+    // do not overlap, so the writer always finishes its update first).
     let shared = o
         .lines
         .iter()
@@ -777,9 +820,11 @@ fn plc_shared() {
             .and_then(|v| v.parse::<u64>().ok())
     };
     check(
-        &o,
+        o,
         shared.is_some_and(|l| {
-            count(l, "fresh=").is_some_and(|n| n >= 1_000) && count(l, "stale=") == Some(0)
+            let fresh = count(l, "fresh=");
+            fresh.is_some_and(|n| n >= 1_000)
+                && count(l, "stale=").is_some_and(|n| n <= stale_allowed(fresh))
         }),
         &format!("the reader's shared statistics: {shared:?}"),
     );
