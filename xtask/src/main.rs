@@ -581,7 +581,7 @@ enum Hostile {
 }
 
 /// The attack systems with the name of their metric: `window_lateness_hostile_<name>`.
-const HOSTILE_SYSTEMS: [(Hostile, &str); 9] = [
+const HOSTILE_SYSTEMS: [(Hostile, &str); 10] = [
     (Hostile::Config("syscall_fuzz"), "fuzz"),
     (Hostile::Config("attack_floods"), "floods"),
     (Hostile::Config("attack_partitions"), "restart_loop"),
@@ -591,6 +591,7 @@ const HOSTILE_SYSTEMS: [(Hostile, &str); 9] = [
     (Hostile::Config("attack_reach"), "reach"),
     (Hostile::Config("attack_restart"), "restart_background"),
     (Hostile::Root("paths"), "root_paths"),
+    (Hostile::Config("smp_isolation"), "other_cpu"),
 ];
 
 /// Boots each attack system on virtual time (the lateness is a property of the kernel and
