@@ -813,7 +813,10 @@ fn set_attribute(
         }
         ThreadAttribute::FollowsCallers => {
             k.require(caller_task, Abilities::SCHEDULING)?;
-            k.threads[target].follows_callers = value != 0;
+            k.threads[target].follows_callers = match value {
+                0 | 1 => value == 1,
+                _ => return Err(Error::InvalidArgument),
+            };
             Ok(())
         }
     }

@@ -294,8 +294,8 @@ impl Kernel {
     /// Every CPU's timer fires at every CPU's boundaries, and the first CPU to take the
     /// interrupt interrupts those whose boundary passed ([`Kernel::on_timer`]). A CPU
     /// waking only at its own boundaries would, under QEMU's deterministic time, take its
-    /// interrupt only when the CPU whose turn it is ends it: for as long as half the time
-    /// to the next timer anywhere, a window lost. On hardware it costs an interrupt per
+    /// interrupt only when the turn of the CPU running then ends, which may be at the next
+    /// timer deadline anywhere: a window lost. On hardware it costs an interrupt per
     /// boundary per CPU.
     pub fn next_event(&self, now: u64) -> u64 {
         // Another CPU's boundary that has passed was seen (that CPU was interrupted).

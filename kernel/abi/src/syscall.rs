@@ -429,8 +429,8 @@ codes::code_enum! {
         Cpu = 8 => "cpu",
         /// 1: the thread moves to the CPU of each thread whose message it takes, so a
         /// server's work runs on its caller's CPU, in its caller's windows there, never in
-        /// another CPU's; 0 (the default): it stays. A move that [`Self::Cpu`] would refuse
-        /// is not made. Needs `SCHEDULING`.
+        /// another CPU's; 0 (the default): it stays (other values: `InvalidArgument`). A
+        /// move that [`Self::Cpu`] would refuse is not made. Needs `SCHEDULING`.
         FollowsCallers = 9 => "follows_callers",
     }
 }

@@ -2,21 +2,23 @@
 //!
 //! The server thread runs above every partition in every window, on the CPU of the thread
 //! whose message it takes (it follows its callers), so whatever it does for a partition
-//! runs in the window that is current on the partition's CPU when the report arrives. A partition that
-//! faults (or calls REPORT_ERROR) in the last microseconds of its window would otherwise
-//! have its report handled (the health monitor's decision, its line, a restart's quick
-//! part) in the next partition's window, which then starts late. So the server handles an
-//! error report of a partition with windows at once only while at least [`WORK_NS`] of the
-//! partition's window remain ([`fits`]); else it queues the report here and handles it at
-//! the start of the partition's next window ([`next_window_after`]) on its CPU (the server
-//! moves there first), above every thread of the partition, before any of them runs again.
+//! runs in the window that is current on the partition's CPU when the report arrives. A
+//! partition that faults (or calls REPORT_ERROR) in the last microseconds of its window
+//! would otherwise have its report handled (the health monitor's decision, its line, a
+//! restart's quick part) in the next partition's window, which then starts late. So the
+//! server handles an error report of a partition with windows at once only while at least
+//! [`WORK_NS`] of the partition's window remain ([`fits`]); else it queues the report here
+//! and handles it at the start of the partition's next window ([`next_window_after`]) on
+//! its CPU (the server moves there first), above every thread of the partition, before any
+//! of them runs again.
 //!
 //! What is not deferred: an action that stops the partition (IDLE, a restart) stops its
 //! task at once (`task_stop`, a bounded kernel call), so nothing of it runs on before its
 //! bookkeeping; a module shutdown is carried out at once; a background partition's reports
-//! (it has no window) are handled at once; so is a restart the restart worker can start at once (`crate::restart`: the server's share is
-//! forgetting the task and queueing the job, less than stopping the task; the worker kills
-//! it and prints the health line in the partition's windows, above every thread of it).
+//! (it has no window) are handled at once; so is a restart the restart worker can start at
+//! once (`crate::restart`: the server's share is forgetting the task and queueing the job,
+//! less than stopping the task; the worker kills it and prints the health line in the
+//! partition's windows, above every thread of it).
 //! The reporting thread waits for its answer
 //! (killed, or REPORT_ERROR answered) until the report is handled; no other thread of the
 //! partition waits. When the queue is full ([`DEFERRED_MAX`] reports, one per waiting
