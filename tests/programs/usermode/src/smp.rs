@@ -1,9 +1,10 @@
 //! Two CPUs (mode `smp`, `-smp 2`): each CPU runs the threads put on it, in its own windows
 //! of the one major frame; a thread goes only to an online CPU, and moves only while no
 //! other CPU runs it; calls to a server on the same and on the other CPU are answered, and
-//! a server that follows its callers answers on the caller's CPU; a task killed while the other CPU runs its thread stops there, and that CPU goes on with
-//! its other threads; a task's I/O ports work on the other CPU, and once it is killed
-//! there a task without ports cannot use them.
+//! a server that follows its callers answers on the caller's CPU; a task killed while the
+//! other CPU runs its thread stops there, and that CPU goes on with its other threads; a
+//! task's I/O ports work on the other CPU, and once it is killed there a task without
+//! ports cannot use them.
 //!
 //! Schedule (major frame 10 ms): CPU 0: TP1 [0, 5 ms); CPU 1: TP2 [0, 5 ms) and TP3
 //! [5, 10 ms). TP1's and TP2's windows overlap in time, which one CPU's windows may not.
@@ -211,7 +212,7 @@ pub fn run() {
     );
 
     // A server that follows its callers, waiting on CPU 1, answers a call from CPU 0 on
-    // CPU 0 (in CPU 0's time), and stays there.
+    // CPU 0 (in CPU 0's time).
     must(
         "thread_set FollowsCallers of the server",
         sys::thread_set(Some(server.id), ThreadAttribute::FollowsCallers, 1),
