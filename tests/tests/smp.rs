@@ -122,7 +122,7 @@ fn smp_partitions() {
     // At 2 s (the schedule runs from about 0.2 s): both CPUs' time is accounted, about
     // 1.8 s each (CPU 0's busy or idle, which cpu0 reads for its own CPU; CPU 1's busy,
     // hog1 leaves it no idle time); windows-b got 4 ms of each 10 ms frame on CPU 1 throughout,
-    // restarts included (the worker moved there pays with its windows; 724 and 696 ms
+    // restarts included (the worker moved there pays with its windows; 724, 696 and 676 ms
     // measured, 622 while each CPU's timer fired only at its own boundaries, so that CPU
     // 1 took its window starts only when CPU 0's turn under QEMU ended); windows-a its 50
     // windows of 4 ms on CPU 0 before it went idle.
