@@ -56,6 +56,33 @@ fn syscall_fuzz() {
     victim_kept_its_windows(&o, 1_000, LATENESS_BOUND_NS);
 }
 
+/// syscall_fuzz with a fuzzer on each of two CPUs: the kernel's lock and cross-CPU paths
+/// under random calls from both at once.
+#[test]
+fn syscall_fuzz_smp() {
+    let o = boot("syscall_fuzz_smp");
+    kernel_held(&o);
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        &o,
+        o.succeeded(),
+        "expected success exit (33): the victim ends the run",
+    );
+    for fuzzer in ["fuzz-0", "fuzz-1"] {
+        check(
+            &o,
+            o.lines.iter().any(|l| {
+                l.contains(&format!("[{fuzzer}] fuzz: done: ")) && l.contains("1000000 calls")
+            }),
+            &format!("{fuzzer} did not finish its 1,000,000 calls before the victim's last window"),
+        );
+    }
+    for line in o.lines.iter().filter(|l| l.contains("victim: windows=")) {
+        eprintln!("{line}");
+    }
+    victim_kept_its_windows(&o, 1_500, LATENESS_BOUND_NS);
+}
+
 #[test]
 fn syscall_fuzz_root() {
     let o = boot("syscall_fuzz_root");

@@ -114,13 +114,17 @@ fn main(start: u64, image_len: u64) {
         if mode == Some(b"paths".as_slice()) {
             paths::root_paths();
         }
-        fuzz(CALLS, true);
+        fuzz(CALLS, true, SEED);
         let _ = sys::system_halt(true);
         return;
     };
     let name = info.name();
     if name.starts_with("fuzz") {
-        fuzz(CALLS, false);
+        // `fuzz-<n>` draws its own sequence (seed + n), so fuzzers side by side differ.
+        let n = name
+            .strip_prefix("fuzz-")
+            .and_then(|n| n.parse::<u64>().ok());
+        fuzz(CALLS, false, SEED.wrapping_add(n.unwrap_or(0)));
         sys::sleep_until(u64::MAX);
     } else if name.starts_with("flood-log") {
         let line = [b'L'; DEBUG_WRITE_MAX as usize];
@@ -899,15 +903,15 @@ impl Write for Line {
 }
 
 /// The fuzzer: see the crate documentation.
-fn fuzz(calls: u64, root: bool) {
+fn fuzz(calls: u64, root: bool, seed: u64) {
     let (thread, task) = sys::thread_self();
     let me = (task.0, thread.0);
     println!(
-        "fuzz: {calls} calls as {}, seed {SEED:#x}, scratch {:#x}",
+        "fuzz: {calls} calls as {}, seed {seed:#x}, scratch {:#x}",
         if root { "the root task" } else { "a partition" },
         scratch().start
     );
-    let mut rng = Rng(SEED);
+    let mut rng = Rng(seed);
     // Every call of the ABI is drawn by name (a call the ABI gains reshuffles the sequence
     // of this seed: docs/isolation.md reports the victim's lateness for the current one).
     let named_calls = Call::COUNT;
@@ -945,7 +949,7 @@ fn fuzz(calls: u64, root: bool) {
         }
     }
     histogram.print();
-    println!("fuzz: done: {done} calls, {skipped} skipped, seed {SEED:#x}");
+    println!("fuzz: done: {done} calls, {skipped} skipped, seed {seed:#x}");
 }
 
 /// `flood-map`: the longest page-range calls a partition may make, without pause: map as
