@@ -44,10 +44,6 @@ fn drop_lower_half() {
     x86_64::instructions::tlb::flush_all();
 }
 
-/// The period of the PIT's turn clock under QEMU's TCG with several CPUs
-/// ([`pit::start_turn_clock`]).
-const TURN_CLOCK_NS: u64 = 20_000;
-
 pub fn start(boot_info: u64) -> ! {
     let entry_tsc = cpu::rdtsc();
     drop_lower_half();
@@ -141,12 +137,10 @@ pub fn start(boot_info: u64) -> ! {
         // SAFETY: the address comes from the MADT's IOAPIC entry.
         let ioapic = unsafe { IoApic::new(io.address) };
         ioapic.mask_all();
+        let (id, address, first, lines) = (io.id, io.address, io.gsi_base, ioapic.line_count());
         kprintln!(
-            "apic: IOAPIC id {} at {:#x}, GSI {}..{}, all lines masked",
-            io.id,
-            io.address,
-            io.gsi_base,
-            io.gsi_base + ioapic.line_count() - 1
+            "apic: IOAPIC id {id} at {address:#x}, GSI {first}..{}, all lines masked",
+            first + lines - 1
         );
         if io.gsi_base == 0 {
             crate::arch::ioapic::install(ioapic, apic_id, machine.overrides());
@@ -210,15 +204,6 @@ pub fn start(boot_info: u64) -> ! {
     crate::arch::cpu::enable_sse_for_user();
     crate::arch::syscall::init(0, crate::arch::stack::top(), crate::arch::gdt::boot_tss());
     let online = crate::arch::smp::start_application_processors(machine, apic_id, regions);
-    // QEMU's TCG runs the CPUs in turns that last until the machine's next timer deadline:
-    // one every 20 us bounds how long a busy CPU keeps the others waiting.
-    if online > 1 && pit::under_tcg() {
-        pit::start_turn_clock(TURN_CLOCK_NS);
-        kprintln!(
-            "pit: turn clock every {} us (TCG, {online} CPUs)",
-            TURN_CLOCK_NS / 1000
-        );
-    }
     {
         let mut k = crate::arch::entry::KERNEL.lock();
         (k.dma, k.online) = (dma, online);

@@ -1,9 +1,9 @@
 //! The 8254 PIT, used as a known clock for calibration (channel 2 counts down once with its
-//! gate driven through port 0x61, without interrupts) and, under QEMU's TCG with several
-//! CPUs, as the turn clock (channel 0, its interrupt delivered nowhere): QEMU's
-//! deterministic time runs the CPUs in turns, each until the machine's next timer
-//! deadline, so a timer that expires every few microseconds bounds every turn without
-//! costing the guest an instruction (docs/architecture.md, "Multicore").
+//! gate driven through port 0x61, without interrupts) and, where an emulator runs several
+//! CPUs in turns, as the turn clock (channel 0, its interrupt delivered nowhere): QEMU's
+//! single-threaded TCG runs each CPU until the machine's next timer deadline, so a timer
+//! that expires every few microseconds bounds every turn without costing the guest an
+//! instruction (docs/architecture.md, "Multicore").
 
 use super::cpu::{inb, outb, rdtsc};
 
@@ -30,15 +30,6 @@ pub fn tsc_ticks_for_ms(ms: u64) -> Option<u64> {
         }
     }
     None
-}
-
-/// Whether this machine is QEMU's TCG (CPUID leaf 0x4000_0000 says `TCGTCGTCGTCG`).
-pub fn under_tcg() -> bool {
-    if core::arch::x86_64::__cpuid(1).ecx & (1 << 31) == 0 {
-        return false;
-    }
-    let leaf = core::arch::x86_64::__cpuid(0x4000_0000);
-    [leaf.ebx, leaf.ecx, leaf.edx] == [0x5447_4354, 0x4354_4743, 0x4743_5447]
 }
 
 /// Lets channel 0 count down in a loop, wrapping every `period_ns` (rate generator); its
