@@ -404,7 +404,7 @@ fn cargo_test(args: &[&str]) -> Result<bool> {
 }
 
 fn test(filter: Option<&str>, scenarios_only: bool) -> Result<bool> {
-    tools::ensure_qemu()?;
+    tools::ensure_qemu_deterministic()?;
     // Host unit tests: the host crates (the workspace's default members), plus the pure
     // logic of the kernel, the APEX runtime, the plant, the PLC runtime, the guest and the
     // user-mode runtime (their library parts), and the Linux-side checks (tests/linux) on the host Linux.
@@ -736,7 +736,7 @@ fn plc_metrics(
 
 /// `cargo xtask bench --guest`: only the guest benchmark; writes `target/bench/guest.json`.
 fn guest_bench(deterministic_time: bool) -> Result<bool> {
-    let qemu = tools::ensure_qemu()?;
+    let qemu = tools::ensure_qemu_deterministic()?;
     let system = artifacts::build(true, KernelVariant::Production)?;
     let metrics = guest_metrics(
         &qemu,
@@ -750,7 +750,7 @@ fn guest_bench(deterministic_time: bool) -> Result<bool> {
 /// `cargo xtask bench --ports`: only the port benchmark system; writes
 /// `target/bench/ports.json`.
 fn ports_bench(deterministic_time: bool) -> Result<bool> {
-    let qemu = tools::ensure_qemu()?;
+    let qemu = tools::ensure_qemu_deterministic()?;
     let system = artifacts::build(true, KernelVariant::Production)?;
     let dir = xtask::target_dir().join("bench");
     let metrics = ports_metrics(&qemu, &system, &dir, deterministic_time)?;
@@ -793,7 +793,7 @@ fn bench_timeout(deterministic_time: bool) -> Duration {
 /// [`xtask::pubsubbench`], always on real time); writes
 /// `target/bench/net.json`.
 fn net_bench() -> Result<bool> {
-    let qemu = tools::ensure_qemu()?;
+    let qemu = tools::ensure_qemu_deterministic()?;
     let system = artifacts::build(true, KernelVariant::Production)?;
     let dir = xtask::target_dir().join("bench");
     let mut metrics = xtask::plcnetbench::run(&qemu, &system, &dir)?;
@@ -805,7 +805,7 @@ fn net_bench() -> Result<bool> {
 /// `cargo xtask bench --iec61499`: only the IEC 61499 benchmark ([`xtask::fortebench`]);
 /// writes `target/bench/iec61499.json`.
 fn iec61499_bench(deterministic_time: bool) -> Result<bool> {
-    let qemu = tools::ensure_qemu()?;
+    let qemu = tools::ensure_qemu_deterministic()?;
     let system = artifacts::build(true, KernelVariant::Production)?;
     let dir = xtask::target_dir().join("bench");
     let metrics = xtask::fortebench::run(&qemu, &system, &dir, deterministic_time)?;
@@ -814,7 +814,7 @@ fn iec61499_bench(deterministic_time: bool) -> Result<bool> {
 
 /// `cargo xtask bench --native`: only the native leg; writes `target/bench/native.json`.
 fn native_bench(deterministic_time: bool) -> Result<bool> {
-    let qemu = tools::ensure_qemu()?;
+    let qemu = tools::ensure_qemu_deterministic()?;
     tools::ensure_bash_static()?;
     let config = xtask::workspace_root().join("tests/configs/bench_guest.toml");
     let metrics = xtask::native::metrics(
@@ -923,7 +923,7 @@ fn plc_bench() -> Result<bool> {
 
 /// `bench --schedules`: only the module-schedule switch bench.
 fn schedules_bench() -> Result<bool> {
-    let qemu = tools::ensure_qemu()?;
+    let qemu = tools::ensure_qemu_deterministic()?;
     let system = artifacts::build(true, KernelVariant::Production)?;
     let dir = xtask::target_dir().join("bench");
     let metrics = schedule_switch_metrics(&qemu, &system, &dir)?;
@@ -932,7 +932,7 @@ fn schedules_bench() -> Result<bool> {
 
 /// `bench --hostile`: only the attack systems (see [`hostile_lateness`]).
 fn hostile() -> Result<bool> {
-    let qemu = tools::ensure_qemu()?;
+    let qemu = tools::ensure_qemu_deterministic()?;
     let system = artifacts::build(true, KernelVariant::Production)?;
     let metrics = hostile_lateness(&qemu, &system, &xtask::target_dir().join("bench"))?;
     print_and_write(&metrics, "hostile.json")
@@ -940,7 +940,7 @@ fn hostile() -> Result<bool> {
 
 /// `cargo xtask bench --soak`: only the soak; writes `target/bench/soak.json`.
 fn soak(frames: u64) -> Result<bool> {
-    let qemu = tools::ensure_qemu()?;
+    let qemu = tools::ensure_qemu_deterministic()?;
     let system = artifacts::build(true, KernelVariant::Production)?;
     let metrics = soak_metrics(&qemu, &system, &xtask::target_dir().join("bench"), frames)?;
     print_and_write(&metrics, "soak.json")
@@ -1012,7 +1012,7 @@ fn print_and_write(metrics: &[xtask::bench::Metric], file: &str) -> Result<bool>
 /// `cargo xtask bench --disk`: only the disk benchmark ([`xtask::diskbench`]); writes
 /// `target/bench/disk.json`.
 fn disk_bench(deterministic_time: bool) -> Result<bool> {
-    let qemu = tools::ensure_qemu()?;
+    let qemu = tools::ensure_qemu_deterministic()?;
     let system = artifacts::build(true, KernelVariant::Production)?;
     let dir = xtask::target_dir().join("bench");
     let metrics = xtask::diskbench::run(&qemu, &system, &dir, deterministic_time)?;
@@ -1022,7 +1022,7 @@ fn disk_bench(deterministic_time: bool) -> Result<bool> {
 /// `cargo xtask bench --kernel`: only the kernel micro-benchmarks; writes
 /// `target/bench/kernel.json`.
 fn kernel_bench(deterministic_time: bool) -> Result<bool> {
-    let qemu = tools::ensure_qemu()?;
+    let qemu = tools::ensure_qemu_deterministic()?;
     let system = artifacts::build(true, KernelVariant::Production)?;
     let metrics = kernel_metrics(
         &qemu,
@@ -1059,7 +1059,7 @@ fn kernel_metrics(
 }
 
 fn bench(deterministic_time: bool) -> Result<bool> {
-    let qemu = tools::ensure_qemu()?;
+    let qemu = tools::ensure_qemu_deterministic()?;
     let system = artifacts::build(true, KernelVariant::Production)?;
     let dir = xtask::target_dir().join("bench");
     // The kernel benchmarks run as the root task; the port benchmark is an APEX partition

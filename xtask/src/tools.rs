@@ -18,6 +18,15 @@ pub const RUST_TARGETS: &[&str] = &[
     crate::linux::MUSL_TARGET,
 ];
 
+/// The oldest QEMU whose deterministic time (`-icount`, the scenarios' and benchmarks')
+/// is fair to several CPUs: from 8.1 its round robin splits the time to the next timer
+/// deadline among the CPUs, before (7.2 is Debian 12's own) the CPU whose turn it is keeps
+/// all of it, so a busy CPU 1 made the PLC on CPU 0 release up to 175 us late.
+pub const QEMU_DETERMINISTIC_MIN: (u32, u32) = (8, 1);
+/// Where Debian 12 gets a newer QEMU.
+const BACKPORTS_LIST: &str = "/etc/apt/sources.list.d/bookworm-backports.list";
+const BACKPORTS_LINE: &str = "deb http://deb.debian.org/debian bookworm-backports main";
+
 /// Paths of QEMU and the OVMF firmware pair.
 #[derive(Clone, Debug)]
 pub struct Qemu {
@@ -142,6 +151,79 @@ pub fn ensure_qemu() -> Result<Qemu> {
     })
 }
 
+/// [`ensure_qemu`], and a QEMU of at least [`QEMU_DETERMINISTIC_MIN`]: as root on Debian 12
+/// it comes from bookworm-backports (added to apt's sources), otherwise the error says
+/// how to get it.
+pub fn ensure_qemu_deterministic() -> Result<Qemu> {
+    let qemu = ensure_qemu()?;
+    let Some(version) = qemu_version(&qemu.binary) else {
+        bail!(
+            "cannot read the version of {} (`--version`)",
+            qemu.binary.display()
+        );
+    };
+    if version >= QEMU_DETERMINISTIC_MIN {
+        return Ok(qemu);
+    }
+    let (major, minor) = QEMU_DETERMINISTIC_MIN;
+    let what = format!(
+        "QEMU {}.{} is older than {major}.{minor}, which the scenarios' deterministic time \
+         with several CPUs needs (docs/architecture.md, \"Multicore\")",
+        version.0, version.1
+    );
+    let install = "apt-get install -y -t bookworm-backports qemu-system-x86";
+    let bookworm = std::fs::read_to_string("/etc/os-release")
+        .is_ok_and(|s| s.lines().any(|l| l == "VERSION_CODENAME=bookworm"));
+    if !bookworm || !is_root() || find_in_path("apt-get").is_none() {
+        bail!(
+            "{what}. On Debian 12:\n    echo '{BACKPORTS_LINE}' | sudo tee {BACKPORTS_LIST}\n    \
+             sudo apt-get update && sudo {install}\n(elsewhere: your distribution's QEMU 8.1 or later)"
+        );
+    }
+    eprintln!("xtask: {what}; installing it from bookworm-backports");
+    std::fs::write(BACKPORTS_LIST, format!("{BACKPORTS_LINE}\n"))
+        .with_context(|| format!("cannot write {BACKPORTS_LIST}"))?;
+    let ok = Command::new("apt-get")
+        .args(["update", "-qq"])
+        .status()
+        .is_ok_and(|s| s.success())
+        && Command::new("apt-get")
+            .args([
+                "install",
+                "-y",
+                "-qq",
+                "-t",
+                "bookworm-backports",
+                "qemu-system-x86",
+            ])
+            .env("DEBIAN_FRONTEND", "noninteractive")
+            .status()
+            .is_ok_and(|s| s.success());
+    let now = qemu_version(&qemu.binary);
+    if !ok || now.is_none_or(|v| v < QEMU_DETERMINISTIC_MIN) {
+        bail!(
+            "installing QEMU from bookworm-backports failed; run `apt-get update && {install}` yourself"
+        );
+    }
+    Ok(qemu)
+}
+
+/// (major, minor) of `qemu-system-x86_64 --version`.
+fn qemu_version(binary: &Path) -> Option<(u32, u32)> {
+    let out = Command::new(binary).arg("--version").output().ok()?;
+    parse_qemu_version(&String::from_utf8_lossy(&out.stdout))
+}
+
+/// (major, minor) of "QEMU emulator version 10.0.2 (Debian ...)".
+fn parse_qemu_version(text: &str) -> Option<(u32, u32)> {
+    let version = text
+        .split_whitespace()
+        .skip_while(|w| *w != "version")
+        .nth(1)?;
+    let mut parts = version.split('.').map(|p| p.parse::<u32>().ok());
+    Some((parts.next()??, parts.next()??))
+}
+
 /// Makes sure rustup has the bare-metal targets (rust-toolchain.toml lists them, but
 /// rustup does not always install them on its own, e.g. with RUSTUP_AUTO_INSTALL=0).
 pub fn ensure_rust_targets() -> Result<()> {
@@ -172,4 +254,24 @@ pub fn ensure_rust_targets() -> Result<()> {
         bail!("`rustup target add {}` failed", missing.join(" "));
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn qemu_versions() {
+        let debian = "QEMU emulator version 7.2.19 (Debian 1:7.2+dfsg-7+deb12u18+b3)\nCopyright";
+        assert_eq!(parse_qemu_version(debian), Some((7, 2)));
+        let backports = "QEMU emulator version 10.0.2 (Debian 1:10.0.2+ds-2+deb13u1~bpo12+1)";
+        assert_eq!(parse_qemu_version(backports), Some((10, 0)));
+        assert!(parse_qemu_version(debian).unwrap() < QEMU_DETERMINISTIC_MIN);
+        assert!(parse_qemu_version(backports).unwrap() >= QEMU_DETERMINISTIC_MIN);
+        assert_eq!(
+            parse_qemu_version("qemu-system-x86_64: unknown option"),
+            None
+        );
+        assert_eq!(parse_qemu_version("QEMU emulator version x.y"), None);
+    }
 }
