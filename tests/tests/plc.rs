@@ -722,6 +722,12 @@ fn smp_shared_plc() {
     ] {
         check(&o, o.line(line).is_some(), &format!("missing {line:?}"));
     }
+    // Real time: QEMU runs each CPU on a host thread, side by side, so no turn clock.
+    check(
+        &o,
+        o.line("smp: the CPUs run in turns").is_none(),
+        "the kernel took CPUs on two host threads for CPUs in turns",
+    );
     shared_globals_kept(&o, true);
 }
 

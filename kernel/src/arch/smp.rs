@@ -246,17 +246,18 @@ pub fn start_application_processors(
 
 /// Whether the CPUs run side by side (hardware, or an emulator with a host thread for each)
 /// rather than in turns on one host thread (QEMU's single-threaded TCG, its deterministic
-/// time included): the boot CPU watches cpu 1's counter for up to 20 ms. Side by side it
-/// changes at almost every look; in turns only when a turn ends, which is a few times.
+/// time included): the boot CPU looks at cpu 1's counter a million times. Side by side it
+/// changes at almost every look (a thousand changes end the watch); in turns only when a
+/// turn ends, a few times. Counted in looks, not time: a host that holds back either
+/// CPU's thread for a while only delays the answer.
 fn side_by_side() -> bool {
-    const CHANGES: u32 = 1_000;
-    let until = crate::time::since_boot_ns() + 20_000_000;
-    let (mut last, mut changes) = (PROBE_COUNT.load(Ordering::Relaxed), 0);
-    while changes < CHANGES && crate::time::since_boot_ns() < until {
+    const CHANGES: usize = 1_000;
+    let mut last = PROBE_COUNT.load(Ordering::Relaxed);
+    let mut changed = || {
         let now = PROBE_COUNT.load(Ordering::Relaxed);
-        changes += u32::from(now != last);
-        last = now;
-    }
+        core::mem::replace(&mut last, now) != now
+    };
+    let changes = (0..1_000_000).filter(|_| changed()).take(CHANGES).count();
     PROBE_DONE.store(true, Ordering::Release);
     changes == CHANGES
 }
