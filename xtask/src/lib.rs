@@ -32,6 +32,7 @@ pub mod plcnetbench;
 pub mod plot;
 pub mod pubsubbench;
 pub mod qemu;
+pub mod scalingbench;
 pub mod scenario;
 pub mod tools;
 

@@ -130,11 +130,18 @@ enum Cmd {
         /// target/bench/iec61499.json.
         #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native", "plc", "schedules", "net", "ports", "kernel", "disk"])]
         iec61499: bool,
+        /// Run only the multicore scaling benchmark (not part of the full bench, about 6
+        /// minutes; always real time): N soft-PLC partitions on N CPUs, N = 1 to 4, each
+        /// running tests/configs/plc/scaling.st; their executions in 60 s of execution time
+        /// (`scaling_executions_<n>cpu` per partition, `scaling_total_<n>cpu`) and the
+        /// speedup over one CPU (`scaling_speedup_<n>cpu`); writes target/bench/scaling.json.
+        #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native", "plc", "schedules", "net", "ports", "kernel", "disk", "deterministic_time", "iec61499"])]
+        scaling: bool,
         /// Run only the long power-cut test (not part of the full bench): scenario
         /// `store_power_cut` with CUTS random power cuts instead of the ordinary run's 20
         /// (`cargo xtask test store_power_cut --scenarios-only` with WARDEN_POWER_CUTS=CUTS;
         /// WARDEN_POWER_CUT_SEED replays a seed); prints each cut and the seed.
-        #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native", "plc", "schedules", "net", "ports", "kernel", "disk", "deterministic_time", "iec61499"])]
+        #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native", "plc", "schedules", "net", "ports", "kernel", "disk", "deterministic_time", "iec61499", "scaling"])]
         power_cut: bool,
         /// Power cuts of `--power-cut`.
         #[arg(
@@ -226,6 +233,7 @@ fn main() -> ExitCode {
             soak: true, frames, ..
         } => soak(frames),
         Cmd::Bench { hostile: true, .. } => hostile(),
+        Cmd::Bench { scaling: true, .. } => scaling_bench(),
         Cmd::Bench {
             power_cut: true,
             cuts,
@@ -528,10 +536,13 @@ fn boot_bench_system(
         what,
         deterministic_time,
         timeout,
+        &[],
     )
 }
 
-/// Boots an image of `artifacts` with `entries` (see [`boot_bench_system`]).
+/// Boots an image of `artifacts` with `entries` (see [`boot_bench_system`]), with
+/// `extra_args` for QEMU.
+#[allow(clippy::too_many_arguments)]
 fn boot_bench_image(
     qemu: &tools::Qemu,
     artifacts: &artifacts::Artifacts,
@@ -540,6 +551,7 @@ fn boot_bench_image(
     what: &str,
     deterministic_time: bool,
     timeout: Duration,
+    extra_args: &[&str],
 ) -> Result<qemu::Outcome> {
     let esp_dir = esp::assemble(&dir.join("esp"), artifacts, &entries)?;
     eprintln!(
@@ -560,7 +572,7 @@ fn boot_bench_image(
             deterministic_time,
             com2: qemu::Com2::Unconnected,
             done_when: Vec::new(),
-            extra_args: Vec::new(),
+            extra_args: extra_args.iter().map(|a| a.to_string()).collect(),
         },
     )?;
     if !outcome.succeeded() {
@@ -638,6 +650,7 @@ fn hostile_lateness(
                     &what,
                     true,
                     timeout,
+                    &[],
                 )?
             }
         };
@@ -930,6 +943,14 @@ fn schedules_bench() -> Result<bool> {
     print_and_write(&metrics, "schedules.json")
 }
 
+/// `bench --scaling`: only the multicore scaling benchmark (`xtask::scalingbench`).
+fn scaling_bench() -> Result<bool> {
+    let qemu = tools::ensure_qemu()?;
+    let system = artifacts::build(true, KernelVariant::Production)?;
+    let metrics = xtask::scalingbench::run(&qemu, &system, &xtask::target_dir().join("bench"))?;
+    print_and_write(&metrics, "scaling.json")
+}
+
 /// `bench --hostile`: only the attack systems (see [`hostile_lateness`]).
 fn hostile() -> Result<bool> {
     let qemu = tools::ensure_qemu_deterministic()?;
@@ -1042,20 +1063,51 @@ fn kernel_metrics(
 ) -> Result<Vec<xtask::bench::Metric>> {
     let mut kernel_bench = system.clone();
     kernel_bench.syssw = artifacts::build_user_programs(&["bench-kernel".to_string()])?.remove(0);
-    let outcome = boot_bench_system(
+    let entries = esp::standard_entries(&kernel_bench, None)?;
+    let outcome = boot_bench_image(
         qemu,
         &kernel_bench,
-        None,
+        entries,
         &dir.join("kernel"),
         "kernel benchmark system",
         deterministic_time,
         bench_timeout(deterministic_time),
+        // A second CPU for `ipc_roundtrip_cross_cpu`.
+        &["-smp", "2"],
     )?;
-    Ok(outcome
+    let mut metrics: Vec<_> = outcome
         .lines
         .iter()
         .filter_map(|l| xtask::bench::parse_line(l))
-        .collect())
+        .collect();
+    // Each CPU's window starts while the other CPU spins (tests/configs/bench_smp_lateness.toml).
+    let config = xtask::workspace_root().join("tests/configs/bench_smp_lateness.toml");
+    let outcome = boot_bench_system(
+        qemu,
+        system,
+        Some(&config),
+        &dir.join("smp_lateness"),
+        "per-CPU window-start lateness system",
+        deterministic_time,
+        bench_timeout(deterministic_time),
+    )?;
+    for cpu in 0..2 {
+        let victim = format!("[victim{cpu}-");
+        let name = format!("window_lateness_cpu{cpu}");
+        let metric = outcome
+            .lines
+            .iter()
+            .filter(|l| l.contains(&victim))
+            .find_map(|l| xtask::bench::parse_victim_lateness(l, &name));
+        match metric {
+            Some(m) => metrics.push(m),
+            None => bail!(
+                "the per-CPU lateness system's victim on CPU {cpu} printed no lateness\n{}",
+                outcome.transcript()
+            ),
+        }
+    }
+    Ok(metrics)
 }
 
 fn bench(deterministic_time: bool) -> Result<bool> {

@@ -4,6 +4,8 @@
 //! * `null_syscall`: an unknown call number, the cheapest kernel entry and exit;
 //! * `ipc_roundtrip`: `call` from the root to a server thread in a child task that answers
 //!   from a `reply_wait` loop (register-only messages), measured in the root;
+//!   `ipc_roundtrip_cross_cpu` the same with the server on CPU 1 (only on a machine with
+//!   a second CPU);
 //! * `exception_roundtrip`: a thread of the root task executes `ud2`; its handler (the
 //!   root's main thread) advances rip by 2 and replies `REPLY_RESUME`; measured in the
 //!   faulting thread from before the fault to after the resume;
@@ -77,7 +79,8 @@ fn main(_: u64, _: u64) {
     let ipc = spawner
         .own_ipc_buffer()
         .unwrap_or_else(|e| broken("root IPC buffer", e));
-    ipc_roundtrip(&mut spawner, &mut samples);
+    ipc_roundtrip(&mut spawner, &mut samples, None);
+    ipc_roundtrip(&mut spawner, &mut samples, Some(1));
     exception_roundtrip(&mut spawner, ipc, &mut samples);
     windows(&mut spawner, &mut samples);
     let _ = sys::system_halt(true);
@@ -112,7 +115,8 @@ extern "C" fn echo_server(_: u64) -> ! {
     }
 }
 
-fn ipc_roundtrip(spawner: &mut Spawner, samples: &mut [u32; SAMPLES]) {
+/// The round trip to a server on the root's CPU, or on `cpu` (skipped if it is not online).
+fn ipc_roundtrip(spawner: &mut Spawner, samples: &mut [u32; SAMPLES], cpu: Option<u64>) {
     let task = spawner
         .create_task(Abilities::NATIVE_SYSCALLS, 255, 0, "bench-server")
         .unwrap_or_else(|e| broken("server task", e));
@@ -120,6 +124,13 @@ fn ipc_roundtrip(spawner: &mut Spawner, samples: &mut [u32; SAMPLES]) {
     let server = spawner
         .thread(Some(task), echo_server, 210, 0, 4)
         .unwrap_or_else(|e| broken("server thread", e));
+    if let Some(cpu) = cpu
+        && sys::thread_set(Some(server.id), ThreadAttribute::Cpu, cpu).is_err()
+    {
+        println!("bench: CPU {cpu} is not online: no ipc_roundtrip_cross_cpu");
+        let _ = sys::task_kill(task);
+        return;
+    }
     sys::thread_start(server.id).unwrap_or_else(|e| broken("thread_start", e));
     let m = Message::new(1, [1, 2, 3]);
     for _ in 0..WARMUP {
@@ -133,7 +144,13 @@ fn ipc_roundtrip(spawner: &mut Spawner, samples: &mut [u32; SAMPLES]) {
             broken("call", r);
         }
     }
-    report("ipc_roundtrip", samples);
+    report(
+        match cpu {
+            None => "ipc_roundtrip",
+            Some(_) => "ipc_roundtrip_cross_cpu",
+        },
+        samples,
+    );
     let _ = sys::task_kill(task);
 }
 
