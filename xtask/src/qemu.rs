@@ -574,6 +574,17 @@ fn launch(
         &options.work_dir,
     );
     cmd.args(&options.extra_args);
+    // QEMU runs the CPUs in turns on one host thread on deterministic time and with a
+    // scenario's `thread=single`; the kernel cannot tell that from a loaded host.
+    if options.deterministic_time
+        || options
+            .extra_args
+            .iter()
+            .any(|a| a.contains("thread=single"))
+    {
+        let file = String::from_utf8_lossy(abi::boot::CPUS_IN_TURNS_FILE);
+        cmd.arg("-fw_cfg").arg(format!("name={file},string=1"));
+    }
     if terminal {
         cmd.stdin(Stdio::inherit()).stdout(Stdio::inherit());
     } else {

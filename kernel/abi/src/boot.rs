@@ -25,7 +25,7 @@ pub const KERNEL_BASE: u64 = 0xffff_ffff_8000_0000;
 pub const BOOT_INFO_MAGIC: u64 = u64::from_le_bytes(*b"PKBOOTIN");
 
 /// Bumped on every incompatible change of [`BootInfo`] or [`MemoryRegion`].
-pub const BOOT_INFO_VERSION: u32 = 3;
+pub const BOOT_INFO_VERSION: u32 = 4;
 
 /// A physical address range, `[start, start + len)`.
 #[repr(C)]
@@ -161,9 +161,31 @@ pub struct BootInfo {
     /// nanoseconds since the Unix epoch (UTC; a clock without a time zone is taken as UTC);
     /// 0 when the firmware has no clock.
     pub wall_clock_at_handoff: u64,
+    /// 1 when the emulator runs the CPUs in turns on one host thread (QEMU's fw_cfg file
+    /// [`CPUS_IN_TURNS_FILE`] holds "1"), else 0: the kernel then bounds every turn with a
+    /// timer (docs/architecture.md, "Multicore").
+    pub cpus_in_turns: u32,
+    pub _reserved: u32,
     /// The CPUs, interrupt controllers, HPET and DMA remapping unit the firmware's ACPI
     /// tables list (the loader parsed them).
     pub machine: crate::machine::Machine,
+}
+
+/// The QEMU fw_cfg file by which the host says the emulator runs the CPUs in turns on one
+/// host thread (`-fw_cfg name=opt/warden/cpus-in-turns,string=1`: `-icount`, or TCG with
+/// `thread=single`), which the machine cannot tell from CPUs a loaded host holds back.
+pub const CPUS_IN_TURNS_FILE: &[u8] = b"opt/warden/cpus-in-turns";
+
+/// The selector of file `name` in a QEMU fw_cfg file directory (item 0x19: a big-endian
+/// count, then 64-byte entries of big-endian size, selector, reserved and a
+/// NUL-padded name), or `None`.
+pub fn fw_cfg_file(directory: &[u8], name: &[u8]) -> Option<u16> {
+    let count = u32::from_be_bytes(directory.get(..4)?.try_into().ok()?) as usize;
+    let entries = directory.get(4..)?.chunks_exact(64).take(count);
+    entries
+        .filter(|e| e[8..].split(|&b| b == 0).next() == Some(name))
+        .map(|e| u16::from_be_bytes([e[4], e[5]]))
+        .next()
 }
 
 /// Nanoseconds since 1970-01-01T00:00:00Z of a calendar date and time (UTC), or `None`
@@ -226,7 +248,7 @@ mod tests {
     fn layout_is_stable() {
         // Loader and kernel are built separately: these sizes are part of the contract.
         assert_eq!(core::mem::size_of::<MemoryRegion>(), 24);
-        assert_eq!(core::mem::size_of::<BootInfo>(), 480);
+        assert_eq!(core::mem::size_of::<BootInfo>(), 488);
         assert_eq!(core::mem::size_of::<crate::machine::Machine>(), 384);
         assert_eq!(core::mem::size_of::<PhysRange>(), 16);
     }
@@ -254,6 +276,27 @@ mod tests {
     }
 
     #[test]
+    fn fw_cfg_files_by_name() {
+        let entry = |size: u32, select: u16, name: &[u8]| {
+            let mut e = [0u8; 64];
+            e[..4].copy_from_slice(&size.to_be_bytes());
+            e[4..6].copy_from_slice(&select.to_be_bytes());
+            e[8..8 + name.len()].copy_from_slice(name);
+            e
+        };
+        let mut directory = 2u32.to_be_bytes().to_vec();
+        directory.extend(entry(4, 0x20, b"etc/boot-fail-wait"));
+        directory.extend(entry(1, 0x2a, CPUS_IN_TURNS_FILE));
+        assert_eq!(fw_cfg_file(&directory, CPUS_IN_TURNS_FILE), Some(0x2a));
+        assert_eq!(fw_cfg_file(&directory, b"etc/boot-fail"), None);
+        // A count beyond the entries read, a short or empty directory.
+        directory[..4].copy_from_slice(&9u32.to_be_bytes());
+        assert_eq!(fw_cfg_file(&directory, CPUS_IN_TURNS_FILE), Some(0x2a));
+        assert_eq!(fw_cfg_file(&directory[..70], CPUS_IN_TURNS_FILE), None);
+        assert_eq!(fw_cfg_file(&[], CPUS_IN_TURNS_FILE), None);
+    }
+
+    #[test]
     fn check_rejects_mismatches() {
         let good = BootInfo {
             magic: BOOT_INFO_MAGIC,
@@ -268,6 +311,8 @@ mod tests {
             page_table_root: 0,
             tsc_at_handoff: 0,
             wall_clock_at_handoff: 0,
+            cpus_in_turns: 0,
+            _reserved: 0,
         };
         assert!(good.check().is_ok());
         assert!(BootInfo { magic: 0, ..good }.check().is_err());

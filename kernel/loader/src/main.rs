@@ -101,6 +101,7 @@ fn load() -> Result<core::convert::Infallible, String> {
     let regions_phys = info_phys + core::mem::size_of::<BootInfo>() as u64;
 
     let wall_clock = wall_clock();
+    let cpus_in_turns = cpus_in_turns();
     println!("loader: exiting boot services");
     // SAFETY: no boot-services object (protocol, pool buffer) is alive past this point: the
     // file system and file buffers were dropped above, and nothing below allocates.
@@ -126,6 +127,8 @@ fn load() -> Result<core::convert::Infallible, String> {
         page_table_root: tables.root(),
         tsc_at_handoff: 0,
         wall_clock_at_handoff: wall_clock,
+        cpus_in_turns: u32::from(cpus_in_turns),
+        _reserved: 0,
     };
     // SAFETY: `info_phys` is the start of our BOOT_INFO allocation, suitably aligned (page).
     unsafe {
@@ -432,4 +435,33 @@ fn wall_clock() -> u64 {
     // UEFI: local time = UTC - time_zone (minutes); none given means UTC.
     let zone_ns = t.time_zone().unwrap_or(0) as i64 * 60_000_000_000;
     local.map_or(0, |ns| ns.saturating_add_signed(zone_ns))
+}
+
+/// Whether the host says the emulator runs the CPUs in turns on one host thread: QEMU's
+/// fw_cfg file [`abi::boot::CPUS_IN_TURNS_FILE`] holds "1". Asked only under a hypervisor
+/// (CPUID leaf 1, ECX bit 31) whose fw_cfg answers with its "QEMU" signature.
+#[allow(unsafe_code)] // QEMU's fw_cfg I/O ports
+fn cpus_in_turns() -> bool {
+    use x86_64::instructions::port::Port;
+    if core::arch::x86_64::__cpuid(1).ecx & (1 << 31) == 0 {
+        return false;
+    }
+    let (mut selector, mut data) = (Port::<u16>::new(0x510), Port::<u8>::new(0x511));
+    // Selecting an item and reading its bytes changes nothing else (an unknown item reads
+    // as zeros).
+    let mut item = |key: u16, len: usize| -> alloc::vec::Vec<u8> {
+        // SAFETY: QEMU's fw_cfg selector port.
+        unsafe { selector.write(key) };
+        // SAFETY: QEMU's fw_cfg data port.
+        (0..len).map(|_| unsafe { data.read() }).collect()
+    };
+    if item(0x0000, 4) != b"QEMU" {
+        return false;
+    }
+    let count = item(0x0019, 4)
+        .iter()
+        .fold(0usize, |n, &b| n << 8 | usize::from(b));
+    let directory = item(0x0019, 4 + 64 * count.min(1024));
+    abi::boot::fw_cfg_file(&directory, abi::boot::CPUS_IN_TURNS_FILE)
+        .is_some_and(|select| item(select, 1) == b"1")
 }

@@ -10,13 +10,13 @@
 //! the page tables of an address space another CPU has loaded makes that CPU flush its
 //! TLB or leave the space, and waits for the answer before it goes on.
 
-use super::{gdt, idt, lapic, pit};
+use super::{gdt, idt, lapic};
 use crate::boot::{DirectMapLinks, FRAMES};
 use crate::kprintln;
 use crate::mem::{PAGE_SIZE, phys_to_virt};
 use abi::boot::{MemoryKind, MemoryRegion};
 use abi::machine::Machine;
-use core::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, AtomicUsize, Ordering};
+use core::sync::atomic::{AtomicU8, AtomicU64, AtomicUsize, Ordering};
 use x86_64::VirtAddr;
 use x86_64::registers::control::{Cr0, Cr3, Cr4};
 use x86_64::registers::model_specific::Efer;
@@ -102,13 +102,6 @@ const BLOCK_PAGES: u64 = (core::mem::size_of::<CpuBlock>() as u64).div_ceil(PAGE
 
 /// CPUs that reported online, the boot CPU included.
 static ONLINE: AtomicUsize = AtomicUsize::new(1);
-
-/// Counted up by cpu 1 until the boot CPU has watched it ([`side_by_side`]).
-static PROBE_COUNT: AtomicU64 = AtomicU64::new(0);
-static PROBE_DONE: AtomicBool = AtomicBool::new(false);
-
-/// The period of the turn clock where the CPUs run in turns ([`pit::start_turn_clock`]).
-const TURN_CLOCK_US: u64 = 20;
 
 const MAX_CPUS: usize = abi::machine::MAX_CPUS;
 
@@ -234,32 +227,7 @@ pub fn start_application_processors(
         "smp: {online} of {} CPUs online; each runs the threads put on it in its own windows",
         aps().count() + 1
     );
-    // An emulator that runs the CPUs in turns on one host thread ends a turn only at the
-    // machine's next timer deadline: one every 20 us bounds how long a busy CPU keeps the
-    // others waiting. CPUs side by side need none (and an emulator's would cost them).
-    if online > 1 && !side_by_side() {
-        pit::start_turn_clock(TURN_CLOCK_US * 1000);
-        kprintln!("smp: the CPUs run in turns: PIT turn clock every {TURN_CLOCK_US} us");
-    }
     online
-}
-
-/// Whether the CPUs run side by side (hardware, or an emulator with a host thread for each)
-/// rather than in turns on one host thread (QEMU's single-threaded TCG, its deterministic
-/// time included): the boot CPU looks at cpu 1's counter a million times. Side by side it
-/// changes at almost every look (a thousand changes end the watch); in turns only when a
-/// turn ends, a few times. Counted in looks, not time: a host that holds back either
-/// CPU's thread for a while only delays the answer.
-fn side_by_side() -> bool {
-    const CHANGES: usize = 1_000;
-    let mut last = PROBE_COUNT.load(Ordering::Relaxed);
-    let mut changed = || {
-        let now = PROBE_COUNT.load(Ordering::Relaxed);
-        core::mem::replace(&mut last, now) != now
-    };
-    let changes = (0..1_000_000).filter(|_| changed()).take(CHANGES).count();
-    PROBE_DONE.store(true, Ordering::Release);
-    changes == CHANGES
 }
 
 /// Writes `value` at byte `at` of the trampoline's pages.
@@ -350,9 +318,6 @@ extern "sysv64" fn ap_entry(block: *mut CpuBlock) -> ! {
     let (apic, _) = lapic::init(lapic_phys);
     kprintln!("cpu {number} online (apic {apic})");
     ONLINE.fetch_add(1, Ordering::Release);
-    while number == 1 && !PROBE_DONE.load(Ordering::Acquire) {
-        PROBE_COUNT.fetch_add(1, Ordering::Relaxed);
-    }
     super::entry::enter_user_mode()
 }
 
