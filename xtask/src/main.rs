@@ -132,7 +132,7 @@ enum Cmd {
         iec61499: bool,
         /// Run only the multicore scaling benchmark (not part of the full bench, about 6
         /// minutes; always real time): N soft-PLC partitions on N CPUs, N = 1 to 4, each
-        /// running tests/configs/plc/scaling.st; their executions in 60 s of execution time
+        /// running tests/configs/plc/scaling.st freewheeling; their executions in 60 s
         /// (`scaling_executions_<n>cpu` per partition, `scaling_total_<n>cpu`) and the
         /// speedup over one CPU (`scaling_speedup_<n>cpu`); writes target/bench/scaling.json.
         #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native", "plc", "schedules", "net", "ports", "kernel", "disk", "deterministic_time", "iec61499"])]
@@ -654,16 +654,8 @@ fn hostile_lateness(
                 )?
             }
         };
-        let metric = outcome.lines.iter().find_map(|l| {
-            xtask::bench::parse_victim_lateness(l, &format!("window_lateness_hostile_{name}"))
-        });
-        match metric {
-            Some(m) => metrics.push(m),
-            None => bail!(
-                "the attack system {config} printed no victim lateness\n{}",
-                outcome.transcript()
-            ),
-        }
+        let name = format!("window_lateness_hostile_{name}");
+        metrics.push(victim_lateness(&outcome, "", &name, &what)?);
     }
     if let Some(worst) = metrics
         .iter()
@@ -1092,22 +1084,39 @@ fn kernel_metrics(
         bench_timeout(deterministic_time),
     )?;
     for cpu in 0..2 {
-        let victim = format!("[victim{cpu}-");
         let name = format!("window_lateness_cpu{cpu}");
-        let metric = outcome
-            .lines
-            .iter()
-            .filter(|l| l.contains(&victim))
-            .find_map(|l| xtask::bench::parse_victim_lateness(l, &name));
-        match metric {
-            Some(m) => metrics.push(m),
-            None => bail!(
-                "the per-CPU lateness system's victim on CPU {cpu} printed no lateness\n{}",
-                outcome.transcript()
-            ),
-        }
+        let what = format!("the per-CPU lateness system's CPU {cpu}");
+        metrics.push(victim_lateness(
+            &outcome,
+            &format!("[victim{cpu}-"),
+            &name,
+            &what,
+        )?);
     }
     Ok(metrics)
+}
+
+/// Metric `name` from the first victim lateness summary on a log line that contains
+/// `victim` (a partition's tag where several victims log; "" for any line); an error
+/// naming `what` without one.
+fn victim_lateness(
+    outcome: &qemu::Outcome,
+    victim: &str,
+    name: &str,
+    what: &str,
+) -> Result<xtask::bench::Metric> {
+    let metric = outcome
+        .lines
+        .iter()
+        .filter(|l| l.contains(victim))
+        .find_map(|l| xtask::bench::parse_victim_lateness(l, name));
+    match metric {
+        Some(m) => Ok(m),
+        None => bail!(
+            "{what}: its victim printed no lateness\n{}",
+            outcome.transcript()
+        ),
+    }
 }
 
 fn bench(deterministic_time: bool) -> Result<bool> {

@@ -180,29 +180,15 @@ pub fn ensure_qemu_deterministic() -> Result<Qemu> {
              sudo apt-get update && sudo {install}\n(elsewhere: your distribution's QEMU 8.1 or later)"
         );
     }
-    eprintln!("xtask: {what}; installing it from bookworm-backports");
     std::fs::write(BACKPORTS_LIST, format!("{BACKPORTS_LINE}\n"))
         .with_context(|| format!("cannot write {BACKPORTS_LIST}"))?;
-    let ok = Command::new("apt-get")
-        .args(["update", "-qq"])
-        .status()
-        .is_ok_and(|s| s.success())
-        && Command::new("apt-get")
-            .args([
-                "install",
-                "-y",
-                "-qq",
-                "-t",
-                "bookworm-backports",
-                "qemu-system-x86",
-            ])
-            .env("DEBIAN_FRONTEND", "noninteractive")
-            .status()
-            .is_ok_and(|s| s.success());
-    let now = qemu_version(&qemu.binary);
-    if !ok || now.is_none_or(|v| v < QEMU_DETERMINISTIC_MIN) {
+    install_packages(
+        &["-t", "bookworm-backports", "qemu-system-x86"],
+        &format!("{what}; a newer QEMU from bookworm-backports is"),
+    )?;
+    if qemu_version(&qemu.binary).is_none_or(|v| v < QEMU_DETERMINISTIC_MIN) {
         bail!(
-            "installing QEMU from bookworm-backports failed; run `apt-get update && {install}` yourself"
+            "bookworm-backports' QEMU is still older than {major}.{minor}; run `apt-get update && {install}` yourself"
         );
     }
     Ok(qemu)
