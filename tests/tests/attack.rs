@@ -3,13 +3,29 @@
 
 use scenarios::{boot, check};
 
-/// The victim's window-start lateness asserted while an attacker runs in the window just
-/// before its own, on virtual time: the quiet case is about 2 us (the timer interrupt, the
-/// window switch and the wake-up from `sleep_until`); the margin is what the issue of
-/// bounded kernel paths allows any partition to add (50 us). Measured per attack: docs/isolation.md,
-/// "Isolation guarantees" (from 5.5 us after a spinning partition to 39 us after a
-/// background restart loop).
-const LATENESS_BOUND_NS: u64 = 52_000;
+/// The victim's window-start lateness on virtual time with no attacker on a CPU to delay it
+/// but the victim's own: the quiet case is about 2 us (the timer interrupt, the window
+/// switch and the wake-up from `sleep_until`).
+const QUIET_NS: u64 = 2_000;
+/// What one kernel path may take, the margin the issue of bounded kernel paths allows a
+/// partition to add to another's window start.
+const KERNEL_PATH_NS: u64 = 50_000;
+/// The bound asserted while an attacker runs on the victim's CPU in the window just
+/// before its own: the attacker's kernel path in progress when the window ends. Measured
+/// per attack: docs/isolation.md, "Isolation guarantees" (from 5.5 us after a spinning
+/// partition to 39 us after a background restart loop).
+const LATENESS_BOUND_NS: u64 = QUIET_NS + KERNEL_PATH_NS;
+/// One turn of another CPU where QEMU runs the CPUs in turns (the kernel's turn clock,
+/// docs/architecture.md, "Multicore"): the victim's CPU may wait that long for its next.
+const TURN_NS: u64 = 20_000;
+
+/// The bound on a multicore machine whose CPUs run in turns, with attackers on
+/// `attacked_cpus` CPUs: one kernel path each (the victim's own CPU's path in progress, and
+/// the kernel lock, which every other attacked CPU may hold for one path before the
+/// victim's CPU gets it: the one big kernel lock of docs/architecture.md), and one turn.
+const fn multicore_bound_ns(attacked_cpus: u64) -> u64 {
+    QUIET_NS + attacked_cpus * KERNEL_PATH_NS + TURN_NS
+}
 
 /// `victim: windows=N missed=M drift=D late_ns max=X mean=Y last=Z` → (N, M, D, X).
 fn victim_summary(line: &str) -> Option<(u64, u64, u64, u64)> {
@@ -80,7 +96,8 @@ fn syscall_fuzz_smp() {
     for line in o.lines.iter().filter(|l| l.contains("victim: windows=")) {
         eprintln!("{line}");
     }
-    victim_kept_its_windows(&o, 1_500, LATENESS_BOUND_NS);
+    // Both CPUs attacked: measured 48 to 58 us late at most, mean 8 us (docs/isolation.md).
+    victim_kept_its_windows(&o, 1_500, multicore_bound_ns(2));
 }
 
 #[test]
@@ -536,5 +553,6 @@ fn smp_isolation() {
     for line in o.lines.iter().filter(|l| l.contains("victim: windows=")) {
         eprintln!("{line}");
     }
-    victim_kept_its_windows(&o, 1_000, LATENESS_BOUND_NS);
+    // Only CPU 1 attacked: measured 33 us late at most (docs/isolation.md).
+    victim_kept_its_windows(&o, 1_000, multicore_bound_ns(1));
 }

@@ -815,7 +815,12 @@ fn shared_globals_kept(o: &xtask::qemu::Outcome, concurrent: bool) {
         );
     }
     // The copy-ins found a new update each cycle (on one CPU never a stale one: the windows
-    // do not overlap, so the writer always finishes its update first).
+    // do not overlap, so the writer always finishes its update first). Concurrent, whether
+    // a reader's copy-in comes before or after the writer's copy-out of the same frame is
+    // a race the host's scheduling of the two CPUs' threads decides (a loaded host had the
+    // reader find no update newer than its previous cycle's in 1,291 of 1,774): there each
+    // copy-in found a consistent update, and the reader's progress is the sequence's
+    // advance checked above.
     let shared = o
         .lines
         .iter()
@@ -831,7 +836,8 @@ fn shared_globals_kept(o: &xtask::qemu::Outcome, concurrent: bool) {
         shared.is_some_and(|l| {
             let fresh = count(l, "fresh=");
             let cycles = fresh.zip(count(l, "unchanged=")).map(|(f, u)| f + u);
-            fresh.is_some_and(|n| n >= 1_000)
+            let expected = if concurrent { cycles } else { fresh };
+            expected.is_some_and(|n| n >= 1_000)
                 && count(l, "stale=").is_some_and(|n| n <= stale_allowed(cycles))
         }),
         &format!("the reader's shared statistics: {shared:?}"),
