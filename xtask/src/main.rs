@@ -152,12 +152,17 @@ enum Cmd {
         )]
         cuts: u32,
     },
-    /// Run all host unit tests, then the QEMU scenarios whose name contains FILTER.
+    /// Run all host unit tests, then the QEMU scenarios whose name contains a FILTER (all
+    /// without one).
     Test {
-        filter: Option<String>,
+        filter: Vec<String>,
         /// Run only the QEMU scenarios (skip the host unit tests).
         #[arg(long)]
         scenarios_only: bool,
+        /// Give every QEMU run of the scenarios at least N CPUs (as WARDEN_SMP=N does; a
+        /// system that uses more gets its own).
+        #[arg(long, value_name = "N", value_parser = clap::value_parser!(u8).range(1..=8))]
+        smp: Option<u8>,
     },
     /// The lint gate of CI: cargo fmt --check, and clippy -D warnings on the host crates,
     /// the kernel, the loader and every user-mode program.
@@ -280,7 +285,8 @@ fn main() -> ExitCode {
         Cmd::Test {
             filter,
             scenarios_only,
-        } => test(filter.as_deref(), scenarios_only),
+            smp,
+        } => test(&filter, scenarios_only, smp),
         Cmd::Lint => xtask::lint::run(),
         Cmd::Oscat { file, write_status } => xtask::oscat::run(file.as_deref(), write_status),
         Cmd::Plot { log, output, plc } => xtask::plot::run(&log, output.as_deref(), plc.as_deref()),
@@ -405,13 +411,20 @@ fn run(config: PathBuf, timeout: Option<u64>, release: bool) -> Result<bool> {
 }
 
 fn cargo_test(args: &[&str]) -> Result<bool> {
+    cargo_test_with(args, &[])
+}
+
+/// `cargo test ARGS` with the environment variables `env` set.
+fn cargo_test_with(args: &[&str], env: &[(&str, String)]) -> Result<bool> {
     let mut cmd = artifacts::cargo();
     cmd.arg("test").args(args);
-    eprintln!("xtask: cargo test {}", args.join(" "));
+    cmd.envs(env.iter().map(|(k, v)| (k, v)));
+    let shown: Vec<String> = env.iter().map(|(k, v)| format!("{k}={v} ")).collect();
+    eprintln!("xtask: {}cargo test {}", shown.concat(), args.join(" "));
     Ok(cmd.status()?.success())
 }
 
-fn test(filter: Option<&str>, scenarios_only: bool) -> Result<bool> {
+fn test(filters: &[String], scenarios_only: bool, smp: Option<u8>) -> Result<bool> {
     tools::ensure_qemu_deterministic()?;
     // Host unit tests: the host crates (the workspace's default members), plus the pure
     // logic of the kernel, the APEX runtime, the plant, the PLC runtime, the guest and the
@@ -431,9 +444,9 @@ fn test(filter: Option<&str>, scenarios_only: bool) -> Result<bool> {
         return Ok(false);
     }
 
-    let scenarios = scenario::all(filter)?;
+    let scenarios = scenario::all(filters)?;
     if scenarios.is_empty() {
-        bail!("no QEMU scenario matches {:?}", filter.unwrap_or(""));
+        bail!("no QEMU scenario matches any of {filters:?}");
     }
     let artifacts = artifacts::build(false, KernelVariant::TestHooks)?;
     let mut programs: Vec<String> = scenarios
@@ -492,10 +505,12 @@ fn test(filter: Option<&str>, scenarios_only: bool) -> Result<bool> {
         s.manifest.damage(&esp_dir)?;
     }
     let mut args = vec!["-p", "scenarios", "--"];
-    if let Some(f) = filter {
-        args.push(f);
-    }
-    cargo_test(&args)
+    args.extend(filters.iter().map(String::as_str));
+    let env: Vec<(&str, String)> = smp
+        .map(|n| ("WARDEN_SMP", n.to_string()))
+        .into_iter()
+        .collect();
+    cargo_test_with(&args, &env)
 }
 
 /// `cargo xtask bench --power-cut`: scenario `store_power_cut` with `cuts` power cuts, run

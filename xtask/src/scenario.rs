@@ -235,14 +235,14 @@ pub fn load(path: &Path) -> Result<Scenario> {
     Ok(Scenario { name, manifest })
 }
 
-/// All scenarios, sorted by name, whose name contains `filter`.
-pub fn all(filter: Option<&str>) -> Result<Vec<Scenario>> {
+/// The scenarios, sorted by name, whose name contains one of `filters` (all of them without a filter).
+pub fn all(filters: &[String]) -> Result<Vec<Scenario>> {
     let mut out = Vec::new();
     for entry in std::fs::read_dir(scenarios_dir()).context("cannot list tests/scenarios")? {
         let path = entry?.path();
         if path.extension().is_some_and(|e| e == "toml") {
             let scenario = load(&path)?;
-            if filter.is_none_or(|f| scenario.name.contains(f)) {
+            if filters.is_empty() || filters.iter().any(|f| scenario.name.contains(f.as_str())) {
                 out.push(scenario);
             }
         }
