@@ -97,9 +97,10 @@ enum Cmd {
         /// `guest_net_*`, `native_net_*`, `net_ratio_*`); writes target/bench/net.json.
         #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native", "plc", "schedules"])]
         net: bool,
-        /// Run only the port benchmark system (tests/configs/bench_ports.toml; also part of
-        /// the full bench): the queuing-port round trips (64 bytes, a 1514-byte frame), the
-        /// frame through a shared-memory ring, the APEX intra-partition objects; writes
+        /// Run only the port benchmark systems (tests/configs/bench_ports.toml and
+        /// bench_ports_smp.toml; also part of the full bench): the queuing-port round trips
+        /// (64 bytes, a 1514-byte frame, 64 bytes from CPU 0 to CPU 1 and back), the frame
+        /// through a shared-memory ring, the APEX intra-partition objects; writes
         /// target/bench/ports.json.
         #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native", "plc", "schedules", "net"])]
         ports: bool,
@@ -777,29 +778,35 @@ fn ports_bench(deterministic_time: bool) -> Result<bool> {
     print_and_write(&metrics, "ports.json")
 }
 
-/// The port benchmark system (`tests/configs/bench_ports.toml`, an APEX partition under
-/// the real syssw): its `bench` lines.
+/// The port benchmark systems (`tests/configs/bench_ports.toml`, an APEX partition under
+/// the real syssw, and `bench_ports_smp.toml`, two on two CPUs): their `bench` lines.
 fn ports_metrics(
     qemu: &tools::Qemu,
     system: &artifacts::Artifacts,
     dir: &std::path::Path,
     deterministic_time: bool,
 ) -> Result<Vec<xtask::bench::Metric>> {
-    let config = xtask::workspace_root().join("tests/configs/bench_ports.toml");
-    let outcome = boot_bench_system(
-        qemu,
-        system,
-        Some(&config),
-        &dir.join("ports"),
-        "ports benchmark system",
-        deterministic_time,
-        bench_timeout(deterministic_time),
-    )?;
-    Ok(outcome
-        .lines
-        .iter()
-        .filter_map(|l| xtask::bench::parse_line(l))
-        .collect())
+    let mut metrics = Vec::new();
+    // The one-CPU system, then the cross-CPU one (tests/configs/bench_ports_smp.toml).
+    for (file, name) in [("bench_ports", "ports"), ("bench_ports_smp", "ports_smp")] {
+        let config = xtask::workspace_root().join(format!("tests/configs/{file}.toml"));
+        let outcome = boot_bench_system(
+            qemu,
+            system,
+            Some(&config),
+            &dir.join(name),
+            "ports benchmark system",
+            deterministic_time,
+            bench_timeout(deterministic_time),
+        )?;
+        metrics.extend(
+            outcome
+                .lines
+                .iter()
+                .filter_map(|l| xtask::bench::parse_line(l)),
+        );
+    }
+    Ok(metrics)
 }
 
 /// How long the kernel and port benchmark systems may run: virtual time runs slower than

@@ -19,6 +19,13 @@
 //!
 //! Prints the `cargo xtask bench` lines, then ends the run (an APPLICATION_ERROR the bench
 //! system maps to `shutdown_success`).
+//!
+//! The cross-CPU port benchmark system (`tests/configs/bench_ports_smp.toml`): partition
+//! `bench-x` on CPU 0 times `queuing_port_roundtrip_cross_cpu`, a 64-byte message sent to
+//! partition `echo-x` on CPU 1, which waits for it and sends it back, while `bench-x`
+//! waits for the answer (both windows the whole frame, so the two run side by side): four
+//! requests served by syssw, whose server follows each caller to its CPU, and a wake-up
+//! on each CPU.
 
 extern crate alloc;
 
@@ -193,4 +200,53 @@ extern "C" fn roundtrip() {
     frames();
     intra();
     raise(b"bench done");
+}
+
+/// `bench-x`: the ports to `echo-x` and back, and the measuring process.
+pub fn create_cross(ctx: &mut StartContext<Warden>) {
+    create_echo_ports(ctx);
+    crate::process(ctx, "ping", cross_ping, None, None);
+}
+
+/// `echo-x`: the same ports, and the process that answers.
+pub fn create_echo(ctx: &mut StartContext<Warden>) {
+    create_echo_ports(ctx);
+    crate::process(ctx, "echo", cross_echo, None, None);
+}
+
+fn create_echo_ports(ctx: &mut StartContext<Warden>) {
+    ctx.create_queuing_port_sender(name("out"), 64, 4, QueuingDiscipline::Fifo)
+        .expect("CREATE_QUEUING_PORT out");
+    ctx.create_queuing_port_receiver(name("in"), 64, 4, QueuingDiscipline::Fifo)
+        .expect("CREATE_QUEUING_PORT in");
+}
+
+extern "C" fn cross_ping() {
+    let out = QueuingPortSender::<Warden>::from_name(name("out")).expect("out");
+    let inp = QueuingPortReceiver::<Warden>::from_name(name("in")).expect("in");
+    let message = [0x5au8; 64];
+    let mut buf = [0u8; 64];
+    measure("queuing_port_roundtrip_cross_cpu", || {
+        out.send(&message, SystemTime::Infinite)
+            .expect("SEND_QUEUING_MESSAGE");
+        let (got, _) = inp
+            .receive(&mut buf, SystemTime::Infinite)
+            .expect("RECEIVE_QUEUING_MESSAGE");
+        assert_eq!(got, &message[..], "the message comes back unchanged");
+    });
+    raise(b"bench done");
+}
+
+extern "C" fn cross_echo() {
+    let out = QueuingPortSender::<Warden>::from_name(name("out")).expect("out");
+    let inp = QueuingPortReceiver::<Warden>::from_name(name("in")).expect("in");
+    let mut buf = [0u8; 64];
+    loop {
+        let (got, _) = inp
+            .receive(&mut buf, SystemTime::Infinite)
+            .expect("RECEIVE_QUEUING_MESSAGE");
+        let len = got.len();
+        out.send(&buf[..len], SystemTime::Infinite)
+            .expect("SEND_QUEUING_MESSAGE");
+    }
 }

@@ -36,6 +36,8 @@
 //! * `handled` (scenario `apex_error_handler`): the error handler with GET_ERROR_STATUS,
 //!   RAISE_APPLICATION_ERROR's codes, and what a handler may not do (see `errors.rs`);
 //! * `bench-q` (`cargo xtask bench`): times queuing-port send + receive through syssw;
+//! * `bench-x` / `echo-x` (`cargo xtask bench`): times a queuing-port round trip from CPU
+//!   0 to CPU 1 and back (see `bench.rs`);
 //! * `bench-s` / `idle` (`cargo xtask bench`): times module-schedule switches (see
 //!   `schedules.rs`);
 //! * `forger` / `bystander` (scenario `forged_fault_report`): the forger sends syssw a
@@ -122,7 +124,7 @@ pub(crate) fn start_aperiodic(process_name: &str, entry: extern "C" fn(), priori
 }
 
 /// Creates and starts a process (`period` None = aperiodic).
-fn process(
+pub(crate) fn process(
     ctx: &mut StartContext<Warden>,
     process_name: &str,
     entry: extern "C" fn(),
@@ -227,6 +229,8 @@ impl Partition<Warden> for Test {
             ),
             "restarter" => restarter(ctx),
             "bench-q" => bench::create(ctx),
+            "bench-x" => bench::create_cross(ctx),
+            "echo-x" => bench::create_echo(ctx),
             "intra" => intra::create(ctx),
             "preempt" => preemption::create(ctx),
             "heap" => heap::create(),
