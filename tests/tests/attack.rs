@@ -538,9 +538,9 @@ fn attack_late_faults() {
     victim_kept_its_windows(&o, 300, LATENESS_BOUND_NS);
 }
 
-/// A victim alone on CPU 0 keeps its windows within the one-CPU attack bound while the
-/// attacks of `attack_floods` and `attack_partitions` run on CPU 1 in windows overlapping
-/// its own (`tests/configs/smp_isolation.toml`).
+/// A victim alone on CPU 0 keeps its windows within the bound for one attacked CPU while
+/// the attacks of `attack_floods` and `attack_partitions` run on CPU 1 in windows
+/// overlapping its own (`tests/configs/smp_isolation.toml`).
 #[test]
 fn smp_isolation() {
     let o = boot("smp_isolation");
