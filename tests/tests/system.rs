@@ -446,14 +446,25 @@ fn system_default() {
     // the plant's level past its refresh, and the PLC closes the valve for that cycle (its
     // safe state); on a loaded host enough of them took the level out of the band.
     let status = tank::status(&o);
-    let outside = status
+    let settled: Vec<_> = status
         .iter()
         .filter(|s| (SETTLED_MS..DISTURBANCE_MS.0).contains(&s.t_ms))
+        .collect();
+    check(
+        &o,
+        settled.len() >= 10,
+        &format!(
+            "{} plant status lines between {SETTLED_MS} ms and the disturbance",
+            settled.len()
+        ),
+    );
+    let outside = settled
+        .iter()
         .filter(|s| (s.level - 1.0).abs() > BAND)
         .count();
     eprintln!(
-        "system_default: {} plant status lines, {outside} outside the band between {SETTLED_MS} ms and the disturbance",
-        status.len()
+        "system_default: {outside} of {} plant status lines between {SETTLED_MS} ms and the disturbance outside the band",
+        settled.len()
     );
     check(
         &o,
