@@ -14,7 +14,7 @@ const KERNEL_PATH_NS: u64 = 50_000;
 /// before its own: the attacker's kernel path in progress when the window ends. Measured
 /// per attack: docs/isolation.md, "Isolation guarantees" (from 5.5 us after a spinning
 /// partition to 39 us after a background restart loop).
-const LATENESS_BOUND_NS: u64 = QUIET_NS + KERNEL_PATH_NS;
+pub(crate) const LATENESS_BOUND_NS: u64 = QUIET_NS + KERNEL_PATH_NS;
 /// One turn of another CPU where QEMU runs the CPUs in turns (the kernel's turn clock,
 /// docs/architecture.md, "Multicore"): the victim's CPU may wait that long for its next.
 const TURN_NS: u64 = 20_000;

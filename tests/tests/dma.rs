@@ -1,6 +1,8 @@
 //! DMA regions (`dma`, `dma_unconfined`): scenario `dma_regions` (no IOMMU), partitions of
 //! `tests/programs/pci-probe`.
 
+// The victim's window-start bound on virtual time: the one-CPU attack bound.
+use crate::attack::LATENESS_BOUND_NS;
 use scenarios::{boot, check};
 
 #[test]
@@ -38,10 +40,6 @@ fn dma_regions() {
         "unconfined, the bus address is the physical address",
     );
 }
-
-/// The victim's window-start lateness bound on virtual time (as `tests/tests/attack.rs`:
-/// the quiet case is about 2 us, plus the 50 us any partition may add).
-const LATENESS_BOUND_NS: u64 = 52_000;
 
 #[test]
 fn attack_dma() {

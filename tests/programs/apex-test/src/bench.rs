@@ -51,10 +51,7 @@ const RING: u64 = apex::user_rt::partition::SHARED_BASE;
 const RING_SIZE: usize = 16 * 1024;
 
 pub fn create(ctx: &mut StartContext<Warden>) {
-    ctx.create_queuing_port_sender(name("out"), 64, 4, QueuingDiscipline::Fifo)
-        .expect("CREATE_QUEUING_PORT out");
-    ctx.create_queuing_port_receiver(name("in"), 64, 4, QueuingDiscipline::Fifo)
-        .expect("CREATE_QUEUING_PORT in");
+    create_message_ports(ctx);
     ctx.create_queuing_port_sender(name("frame-out"), FRAME, 4, QueuingDiscipline::Fifo)
         .expect("CREATE_QUEUING_PORT frame-out");
     ctx.create_queuing_port_receiver(name("frame-in"), FRAME, 4, QueuingDiscipline::Fifo)
@@ -204,17 +201,19 @@ extern "C" fn roundtrip() {
 
 /// `bench-x`: the ports to `echo-x` and back, and the measuring process.
 pub fn create_cross(ctx: &mut StartContext<Warden>) {
-    create_echo_ports(ctx);
+    create_message_ports(ctx);
     crate::process(ctx, "ping", cross_ping, None, None);
 }
 
 /// `echo-x`: the same ports, and the process that answers.
 pub fn create_echo(ctx: &mut StartContext<Warden>) {
-    create_echo_ports(ctx);
+    create_message_ports(ctx);
     crate::process(ctx, "echo", cross_echo, None, None);
 }
 
-fn create_echo_ports(ctx: &mut StartContext<Warden>) {
+/// The 64-byte ports `out` and `in` (`bench-q`'s channel back into itself, `bench-x`'s and
+/// `echo-x`'s to each other).
+fn create_message_ports(ctx: &mut StartContext<Warden>) {
     ctx.create_queuing_port_sender(name("out"), 64, 4, QueuingDiscipline::Fifo)
         .expect("CREATE_QUEUING_PORT out");
     ctx.create_queuing_port_receiver(name("in"), 64, 4, QueuingDiscipline::Fifo)
