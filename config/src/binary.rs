@@ -75,7 +75,7 @@
 //! 124    2    first attachment, 126  2  attachment count
 //! 128    2    first port,       130  2  port count
 //! 132    1    PCI device count (<= pci::MAX_PARTITION_DEVICES)
-//! 133    1    CPU its threads run on (< the system's CPUs)
+//! 133    1    CPUs its threads run on: bit n = CPU n (not none, < the system's CPUs)
 //! 134    2    reserved
 //! 136    16   PCI devices: routing ids (u16), the unused slots zero; none owned twice
 //! 152    8    DMA region in bytes (`dma`; 0 = none; multiple of 4096, <= memory, only
@@ -248,8 +248,8 @@ pub mod partition {
     pub const PORT_COUNT: Field = Field::new(130, 2);
     /// How many of `DEVICES` are used (at most `pci::MAX_PARTITION_DEVICES`).
     pub const DEVICE_COUNT: Field = Field::new(132, 1);
-    /// The CPU its threads run on.
-    pub const CPU: Field = Field::new(133, 1);
+    /// The CPUs its threads run on: bit n = CPU n.
+    pub const CPUS: Field = Field::new(133, 1);
     pub const RESERVED_B: Field = Field::new(134, 2);
     /// The PCI functions it owns: `DEVICE_COUNT` routing ids (`pci::Address::id`, u16 LE),
     /// the unused ones zero.
@@ -279,7 +279,7 @@ pub mod partition {
         FIRST_PORT,
         PORT_COUNT,
         DEVICE_COUNT,
-        CPU,
+        CPUS,
         RESERVED_B,
         DEVICES,
         DMA,
@@ -719,7 +719,10 @@ impl<'a> SystemView<'a> {
                 if users.clone().next().is_none() {
                     return fail("time partition used by no partition");
                 }
-                if !users.into_iter().any(|r| partition::CPU.u8(r) == cpu) {
+                if !users
+                    .into_iter()
+                    .any(|r| partition::CPUS.u8(r) & 1 << cpu != 0)
+                {
                     return fail("time partition used by no partition of its CPU");
                 }
             }
@@ -824,8 +827,12 @@ impl<'a> SystemView<'a> {
             if P::TIME_PARTITION.u8(r) >= TIME_PARTITIONS {
                 return Err(fail("time partition above 15"));
             }
-            if P::CPU.u8(r) >= self.cpus() {
-                return Err(fail("CPU beyond the system's CPUs"));
+            match P::CPUS.u8(r) {
+                0 => return Err(fail("no CPU")),
+                cpus if u32::from(cpus) >> self.cpus() != 0 => {
+                    return Err(fail("CPU beyond the system's CPUs"));
+                }
+                _ => {}
             }
             if !P::RESERVED_B.is_zero(r) {
                 return Err(fail("reserved bytes are not zero"));
@@ -1149,7 +1156,8 @@ impl<'a> SystemView<'a> {
             mcp: P::MCP.u8(r),
             priority: P::PRIORITY.u8(r),
             time_partition: P::TIME_PARTITION.u8(r),
-            cpu: P::CPU.u8(r),
+            cpu: P::CPUS.u8(r).trailing_zeros() as u8,
+            cpus: P::CPUS.u8(r),
             schedule_control: P::FLAGS.u8(r) & FLAG_SCHEDULE_CONTROL != 0,
             dma: P::DMA.get(r),
             dma_unconfined: P::FLAGS.u8(r) & FLAG_DMA_UNCONFINED != 0,
@@ -1337,9 +1345,11 @@ pub struct PartitionView<'a> {
     pub priority: u8,
     /// 0 = background.
     pub time_partition: u8,
-    /// The CPU its threads run on: in that CPU's windows of its time partition (or in that
-    /// CPU's background).
+    /// The first of `cpus`: where its first thread starts.
     pub cpu: u8,
+    /// The CPUs its threads run on (bit n: CPU n), each in that CPU's windows of its time
+    /// partition (or in that CPU's background).
+    pub cpus: u8,
     /// May switch the module schedule (ARINC SET_MODULE_SCHEDULE).
     pub schedule_control: bool,
     /// Bytes of its DMA region (`dma`; 0: none): physically contiguous, part of `memory`.
@@ -1569,7 +1579,7 @@ mod encode {
                 .set(P::MCP, u64::from(p.mcp))
                 .set(P::PRIORITY, u64::from(p.priority))
                 .set(P::TIME_PARTITION, u64::from(p.time_partition))
-                .set(P::CPU, u64::from(p.cpu))
+                .set(P::CPUS, u64::from(p.cpus))
                 .set(
                     P::FLAGS,
                     u64::from(

@@ -38,7 +38,7 @@
 //! partition = "plc"               # a partition that is not background
 //! offset = "0ms"
 //! duration = "2ms"                # windows and major frames last at least 10us
-//! cpu = 0                         # optional: its partition's CPU, the default
+//! cpu = 0                         # one of its partition's CPUs; optional with one
 //! # A single schedule may also be written as [schedule] + [[schedule.windows]].
 //!
 //! [[shared_memory]]               # up to 32 segments
@@ -57,7 +57,7 @@
 //! abilities = ["debug_log"]       # optional, see "Abilities"
 //! native_syscalls = true          # optional, default true; a paravirtualized guest says false
 //! time = 1                        # optional: "background" (TP0) or a time partition 1..=15
-//! cpus = [0]                      # optional, default [0]: its CPU (one), see "CPUs"
+//! cpus = [0]                      # optional, default [0]: its CPUs, see "CPUs"
 //! preempts_windows = false         # optional, background only: see "Time"
 //! schedule_control = false        # optional: may switch the module schedule, see "Time"
 //! io_ports = ["0x2f8-0x2ff", "0x60", 0x61]   # inclusive ranges, hex or decimal
@@ -135,18 +135,22 @@
 //! 0 (the boot CPU) to `cpus` − 1; `cargo xtask` boots it with at least that many. Every
 //! CPU has its own schedule of windows within each major frame (the frames of all CPUs
 //! start together; a schedule switch takes effect on every CPU at once). A partition is
-//! bound to one CPU, `cpus = [n]` (default `[0]`; a list, as multicore ARINC 653 systems
-//! write it, but of exactly one CPU for now: a partition runs on one CPU), below the
-//! system's `cpus`: its threads run only there, in that CPU's windows of its time
-//! partition, or, for a background partition, in the time that CPU's windows leave. A
-//! window is in the schedule of its partition's CPU; `cpu = n` may say so and must name
-//! that CPU. Windows of one CPU must not overlap; windows of different CPUs may, and
-//! usually do (the point of running partitions side by side). A fixed `time = N` needs a
-//! window on the partition's CPU, and a background partition must stay below the floor
-//! of the windowed partitions of its own CPU only. syssw binds every partition's first
-//! thread to its CPU (the threads it creates stay there); a machine with fewer CPUs
-//! online than a partition's stops the boot with `syssw: configuration rejected:
-//! partition NAME: CPU n is not online ...`.
+//! bound to CPUs `cpus = [n, ...]` (default `[0]`; each below the system's `cpus`, none
+//! twice): its threads run only there, each in the windows of its time partition on its
+//! own CPU, or, for a background partition, in the time that CPU's windows leave. The
+//! kernel holds the set (the partition's resource partition's CPU mask): the partition
+//! moves its threads among its CPUs itself (`thread_set` `cpu`), never beyond. A window
+//! is in the schedule of one CPU: `cpu = n`, which must be one of its partition's CPUs,
+//! and may be left out when the partition has one CPU. A windowed partition on several
+//! CPUs needs a window of its time partition on each (its threads there would never run
+//! otherwise); its windows on different CPUs may overlap (it then runs on both at once).
+//! Windows of one CPU must not overlap; windows of different CPUs may, and usually do
+//! (the point of running partitions side by side). A fixed `time = N` needs a window on
+//! each of the partition's CPUs, and a background partition must stay below the floor of
+//! the windowed partitions of its own CPUs only. syssw starts every partition's first
+//! thread on the first of its CPUs (the threads it creates start there too); a machine
+//! with fewer CPUs online than a partition's stops the boot with `syssw: configuration
+//! rejected: partition NAME: CPU n is not online ...`.
 //!
 //! **Abilities.** Every partition has `native_syscalls` unless `native_syscalls = false`;
 //! `abilities` adds any of `create_task`, `create_thread`, `map`, `irq`, `io_ports`,

@@ -57,9 +57,11 @@ pub struct Partition {
     pub priority: u8,
     /// 0 = background.
     pub time_partition: u8,
-    /// The CPU its threads run on (`cpus = [n]`): in that CPU's windows of its time
-    /// partition, or in that CPU's background.
+    /// The first of `cpus`: where its first thread starts.
     pub cpu: u8,
+    /// The CPUs its threads run on (`cpus = [n, ...]`; bit n: CPU n), each in that CPU's
+    /// windows of its time partition, or in that CPU's background.
+    pub cpus: u8,
     /// May switch the module schedule (ARINC SET_MODULE_SCHEDULE).
     pub schedule_control: bool,
     pub io_ports: Vec<IoRange>,
@@ -602,6 +604,7 @@ impl System {
                     priority: p.priority,
                     time_partition: p.time_partition,
                     cpu: p.cpu,
+                    cpus: p.cpus,
                     schedule_control: p.schedule_control,
                     io_ports: p.io_ports().collect(),
                     irqs: p.irqs,

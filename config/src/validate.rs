@@ -390,59 +390,54 @@ impl Validator<'_, '_> {
         }
     }
 
-    /// A partition's `cpus`: exactly one CPU the system uses (default `[0]`). 0 when it
-    /// has an error (the partition is then marked in `unbound`).
-    fn partition_cpu(
+    /// A partition's `cpus`: CPUs the system uses, none twice (default `[0]`), as a mask
+    /// (bit n: CPU n). `[0]` when it has an error (the partition is then marked in
+    /// `unbound`).
+    fn partition_cpus(
         &mut self,
         raw: &schema::Partition,
         path: &KeyPath,
         (index, name): (usize, &str),
     ) -> u8 {
         let Some(list) = &raw.cpus else {
-            return 0;
+            return 1;
         };
         let here = path.key("cpus");
-        let entries = list.get_ref();
-        let Some(first) = entries.first() else {
+        if list.get_ref().is_empty() {
             self.error(
                 start(list),
                 &here,
-                format!(
-                    "partition `{name}` names no CPU; a partition runs on one CPU: give it, e.g. `cpus = [0]`"
-                ),
+                format!("partition `{name}` names no CPU: give at least one, e.g. `cpus = [0]`"),
             );
             self.unbound.push(index);
-            return 0;
-        };
-        if let Some(second) = entries.get(1) {
-            self.error(
-                start(second),
-                &here.index(1),
+            return 1;
+        }
+        let mut mask = 0u8;
+        for (i, entry) in list.get_ref().iter().enumerate() {
+            let n = *entry.get_ref();
+            let why = if n < 0 {
+                format!("partition `{name}`: {n} is not a CPU number (CPU 0 is the boot CPU)")
+            } else if n >= i64::from(self.cpus) {
                 format!(
-                    "partition `{name}` lists {} CPUs; a partition runs on one CPU: give one, e.g. `cpus = [{}]`",
-                    entries.len(),
-                    first.get_ref()
-                ),
-            );
-            self.unbound.push(index);
+                    "partition `{name}` runs on CPU {n}, but {}",
+                    self.cpus_used()
+                )
+            } else if mask & 1 << n != 0 {
+                format!("partition `{name}` lists CPU {n} twice")
+            } else {
+                mask |= 1 << n;
+                continue;
+            };
+            self.error(start(entry), &here.index(i), why);
+            if !self.unbound.contains(&index) {
+                self.unbound.push(index);
+            }
         }
-        let n = *first.get_ref();
-        if (0..i64::from(self.cpus)).contains(&n) {
-            return n as u8;
-        }
-        let why = if n < 0 {
-            format!("partition `{name}`: {n} is not a CPU number (CPU 0 is the boot CPU)")
+        if self.unbound.contains(&index) {
+            1
         } else {
-            format!(
-                "partition `{name}` runs on CPU {n}, but {}",
-                self.cpus_used()
-            )
-        };
-        self.error(start(first), &here.index(0), why);
-        if !self.unbound.contains(&index) {
-            self.unbound.push(index);
+            mask
         }
-        0
     }
 
     fn segments(&mut self, doc: &schema::Document) -> Vec<(Segment, usize)> {
@@ -550,7 +545,7 @@ impl Validator<'_, '_> {
 
             let abilities = self.abilities(raw, &path);
             let time = self.time(raw, &path);
-            let cpu = self.partition_cpu(raw, &path, (index, &name));
+            let cpus = self.partition_cpus(raw, &path, (index, &name));
 
             let io_ports = self.io_ports(doc, raw, &path, index, &mut io_seen);
 
@@ -640,7 +635,8 @@ impl Validator<'_, '_> {
                 mcp,
                 priority,
                 time_partition: 0,
-                cpu,
+                cpu: cpus.trailing_zeros() as u8,
+                cpus,
                 schedule_control: raw.schedule_control.as_ref().is_some_and(|b| *b.get_ref()),
                 io_ports,
                 irqs,
@@ -2918,7 +2914,7 @@ impl Validator<'_, '_> {
         let mut window_owners: Vec<Vec<usize>> = Vec::new();
         let mut names: Vec<(String, usize)> = Vec::new();
         // Partitions some window names (even a window with other errors).
-        let mut named = vec![false; partitions.len()];
+        let mut named = vec![None; partitions.len()];
         let entries = self.at_most(
             entries,
             MAX_SCHEDULES,
@@ -3083,14 +3079,14 @@ impl Validator<'_, '_> {
     }
 
     /// A schedule's valid windows; marks in `named` every partition a window names (even a
-    /// window with other errors).
+    /// window with other errors) with the CPUs of its valid windows.
     fn schedule_windows(
         &mut self,
         path: &KeyPath,
         raw: &schema::Schedule,
         partitions: &[Partition],
         times: &[Time],
-        named: &mut [bool],
+        named: &mut [Option<u8>],
     ) -> Vec<Slot> {
         let mut windows: Vec<Slot> = Vec::new();
         let entries = array_entries(&raw.windows, &path.key("windows"));
@@ -3120,11 +3116,16 @@ impl Validator<'_, '_> {
                         w.partition.get_ref()
                     ),
                 ),
-                Some(p) => named[p] = true,
+                Some(p) => named[p] = Some(named[p].unwrap_or(0)),
             }
             // (A background partition's window is refused above.)
             let windowed = partition.filter(|&p| times[p] != Time::Background);
             let cpu = self.window_cpu(w, &wpath, windowed.map(|p| (p, &partitions[p])));
+            // (A refused window counts as on all its partition's CPUs: one error is enough.)
+            if let Some(p) = windowed {
+                let on = cpu.map_or(partitions[p].cpus, |c| 1 << c);
+                named[p] = named[p].map(|cpus| cpus | on);
+            }
             let offset = self.duration(&w.offset, &wpath.key("offset"));
             let duration = self.duration(&w.duration, &wpath.key("duration"));
             if let Some(short) = duration.filter(|&d| d < MIN_WINDOW) {
@@ -3176,7 +3177,20 @@ impl Validator<'_, '_> {
         let bound = partition.filter(|(p, _)| !self.unbound.contains(p));
         let Some(cpu) = &w.cpu else {
             // The partition's (0 for a partition without a valid `cpus`: not checked).
-            return Some(bound.map_or(0, |(_, p)| p.cpu));
+            let Some((_, p)) = bound.filter(|(_, p)| !p.cpus.is_power_of_two()) else {
+                return Some(bound.map_or(0, |(_, p)| p.cpu));
+            };
+            self.error(
+                start(&w.partition),
+                &wpath.key("partition"),
+                format!(
+                    "partition `{}` runs on CPUs {}: say in which CPU's schedule this window is, e.g. `cpu = {}`",
+                    p.name,
+                    cpu_list(p.cpus),
+                    p.cpu
+                ),
+            );
+            return None;
         };
         let here = wpath.key("cpu");
         let n = *cpu.get_ref();
@@ -3190,14 +3204,19 @@ impl Validator<'_, '_> {
             return None;
         }
         if let Some((_, p)) = bound
-            && i64::from(p.cpu) != n
+            && p.cpus & 1 << n == 0
         {
+            let (s, list) = if p.cpus.is_power_of_two() {
+                ("", "its CPU")
+            } else {
+                ("s", "one of its CPUs")
+            };
             self.error(
                 start(cpu),
                 &here,
                 format!(
-                    "partition `{}` runs on CPU {}; this window is on CPU {n} (a partition's windows are in the schedule of its CPU)",
-                    p.name, p.cpu
+                    "partition `{}` runs on CPU{s} {}; this window is on CPU {n} (a partition's windows are in the schedule of {list})",
+                    p.name, cpu_list(p.cpus)
                 ),
             );
             return None;
@@ -3355,7 +3374,7 @@ impl Validator<'_, '_> {
         for (p, (_, value)) in partitions.iter().zip(&raw) {
             let floor = partitions
                 .iter()
-                .filter(|w| w.time_partition != 0 && w.cpu == p.cpu)
+                .filter(|w| w.time_partition != 0 && w.cpus & p.cpus != 0)
                 .min_by_key(|w| w.priority);
             let raw = value.get_ref();
             let path = base.key(&p.name);
@@ -3405,10 +3424,10 @@ impl Validator<'_, '_> {
         doc: &schema::Document,
         partitions: &mut [Partition],
         times: &[Time],
-        named: &[bool],
+        named: &[Option<u8>],
     ) {
         // Time partitions: explicit numbers first, then the lowest free ones in source order.
-        let has_window = |p: usize| named[p];
+        let has_window = |p: usize| named[p].is_some();
         let mut used = [false; TIME_PARTITIONS as usize];
         for t in times {
             if let Time::Explicit(n, _) = t {
@@ -3455,36 +3474,53 @@ impl Validator<'_, '_> {
             };
             partitions[p].time_partition = tp;
         }
-        // A partition runs in the windows of its time partition on its own CPU.
+        // A partition runs in the windows of its time partition on each of its CPUs.
         for (p, time) in times.iter().enumerate() {
-            if let Time::Explicit(n, at) = *time {
-                let cpu = partitions[p].cpu;
-                let windows_on = |on: Option<u8>| {
-                    (0..partitions.len()).any(|q| {
-                        named[q]
-                            && partitions[q].time_partition == n
-                            && on.is_none_or(|c| partitions[q].cpu == c)
-                    })
-                };
-                let name = partitions[p].name.clone();
-                if !windows_on(None) {
-                    self.error(
-                        at,
-                        &base.key(&name).key("time"),
-                        format!(
-                            "time partition {n} of partition `{name}` has no window in any schedule"
-                        ),
-                    );
-                } else if !windows_on(Some(cpu)) && !self.unbound.contains(&p) {
-                    self.error(
-                        at,
-                        &base.key(&name).key("time"),
-                        format!(
-                            "time partition {n} of partition `{name}` has no window on CPU {cpu}, the CPU it runs on (its windows are those of its CPU's schedule)"
-                        ),
-                    );
-                }
+            let (n, at) = match *time {
+                Time::Explicit(n, at) => (n, Some(at)),
+                Time::Auto if named[p].is_some() => (partitions[p].time_partition, None),
+                _ => continue,
+            };
+            let name = partitions[p].name.clone();
+            let windows_on = |c: u8| {
+                (0..partitions.len()).any(|q| {
+                    partitions[q].time_partition == n && named[q].is_some_and(|on| on & 1 << c != 0)
+                })
+            };
+            let windowed = |q: usize| named[q].is_some() && partitions[q].time_partition == n;
+            if let Some(at) = at.filter(|_| !(0..partitions.len()).any(windowed)) {
+                self.error(
+                    at,
+                    &base.key(&name).key("time"),
+                    format!(
+                        "time partition {n} of partition `{name}` has no window in any schedule"
+                    ),
+                );
+                continue;
             }
+            let cpus = partitions[p].cpus;
+            // (A window of a one-CPU partition's own time partition is on its CPU or refused.)
+            if n == 0 || self.unbound.contains(&p) || at.is_none() && cpus.is_power_of_two() {
+                continue;
+            }
+            let Some(cpu) = (0..8).find(|&c| cpus & 1 << c != 0 && !windows_on(c)) else {
+                continue;
+            };
+            let (key, at) = match at {
+                Some(at) => ("time", at),
+                None => ("cpus", partition_key_at(doc, &name)),
+            };
+            let why = if cpus.is_power_of_two() {
+                format!(
+                    "time partition {n} of partition `{name}` has no window on CPU {cpu}, the CPU it runs on (its windows are those of its CPU's schedule)"
+                )
+            } else {
+                format!(
+                    "partition `{name}` runs on CPUs {}, but time partition {n} has no window on CPU {cpu}: its threads there would never run (add a window with `cpu = {cpu}`)",
+                    cpu_list(cpus)
+                )
+            };
+            self.error(at, &base.key(&name).key(key), why);
         }
     }
 
@@ -3844,4 +3880,17 @@ fn parse_key(text: &str) -> Result<Vec<u8>, String> {
     plc_online::session::parse_key_file(text, &mut key)
         .map(|len| key[..len].to_vec())
         .map_err(|e| e.to_string())
+}
+
+/// CPUs of a mask as a config writes them: `1`, `1 and 2`, `0, 1 and 3`.
+fn cpu_list(mask: u8) -> String {
+    let cpus: Vec<String> = (0..8)
+        .filter(|c| mask & 1 << c != 0)
+        .map(|c| c.to_string())
+        .collect();
+    match cpus.split_last() {
+        Some((last, [])) => last.clone(),
+        Some((last, rest)) => format!("{} and {last}", rest.join(", ")),
+        None => String::new(),
+    }
 }

@@ -321,7 +321,7 @@ fn windows_of_two_cpus_round_trip() {
     // a bound to CPU 1: its windows on CPU 0 serve no partition there.
     invalid(Table::Window, 0, "used by no partition of its CPU")(edit(&|b| {
         let at = record(b, Table::Partition, 0);
-        partition::CPU.set(&mut b[at..], 1);
+        partition::CPUS.set(&mut b[at..], 0b10);
     }));
 }
 
@@ -556,7 +556,11 @@ fn partition_damage() {
     }));
     invalid(Table::Partition, 2, "CPU beyond the system's CPUs")(damaged(|b| {
         let at = p(b, 2);
-        partition::CPU.set(&mut b[at..], 2);
+        partition::CPUS.set(&mut b[at..], 0b101);
+    }));
+    invalid(Table::Partition, 2, "no CPU")(damaged(|b| {
+        let at = p(b, 2);
+        partition::CPUS.set(&mut b[at..], 0);
     }));
     invalid(Table::Partition, 0, "priority above the MCP")(damaged(|b| {
         let at = p(b, 0);

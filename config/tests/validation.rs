@@ -1914,15 +1914,93 @@ fn partitions_and_their_windows_carry_their_cpu() {
     assert_eq!(load_ok(&explicit), s);
 }
 
+/// `a` on CPUs 0 and 1 with its window at 0..2ms on CPU 0 and another at 4..6ms on CPU 1.
+fn a_on_two_cpus() -> String {
+    two_cpus(&[
+        ("# a", "cpus = [0, 1]"),
+        (
+            "duration = \"2ms\"",
+            "duration = \"2ms\"\ncpu = 0\n\n[[schedules.windows]]\npartition = \"a\"\noffset = \"4ms\"\nduration = \"2ms\"\ncpu = 1",
+        ),
+    ])
+}
+
 #[test]
-fn a_partition_runs_on_one_cpu() {
+fn a_partition_runs_on_several_cpus_in_each_ones_windows() {
+    let s = load_ok(&a_on_two_cpus());
+    let a = &s.partitions[0];
+    assert_eq!(
+        (a.cpus, a.cpu),
+        (0b11, 0),
+        "both CPUs; its first thread on CPU 0"
+    );
+    let on: Vec<_> = s.schedules[0]
+        .windows
+        .iter()
+        .map(|w| (w.offset, w.cpu))
+        .collect();
+    assert_eq!(on, [(0, 0), (4_000_000, 1)]);
+    // Overlapping windows of the partition on its two CPUs: it runs on both at once.
+    let overlapping = a_on_two_cpus().replace("offset = \"4ms\"", "offset = \"1ms\"");
+    assert_eq!(
+        load_ok(&overlapping).schedules[0].windows[1].offset,
+        1_000_000
+    );
+    // Windows on one CPU still must not overlap.
+    let same_cpu = a_on_two_cpus()
+        .replace("cpu = 1", "cpu = 0")
+        .replace("offset = \"4ms\"", "offset = \"1ms\"");
+    let errors = load(&same_cpu).expect_err("windows of one CPU overlap");
+    assert!(
+        errors.iter().any(|d| d.message.contains("overlap")),
+        "{errors:?}"
+    );
+}
+
+#[test]
+fn a_several_cpu_partitions_windows_name_their_cpu_and_cover_each_cpu() {
     let src = two_cpus(&[("# a", "cpus = [0, 1]")]);
     expect_one(
         &src,
-        "cpus = [0, ^1]",
+        "partition = ^\"a\"",
+        0,
+        "schedules[0].windows[0].partition",
+        "partition `a` runs on CPUs 0 and 1: say in which CPU's schedule this window is, e.g. `cpu = 0`",
+    );
+    let src = two_cpus(&[
+        ("# a", "cpus = [0, 1]"),
+        ("duration = \"2ms\"", "duration = \"2ms\"\ncpu = 1"),
+    ]);
+    expect_one(
+        &src,
+        "[partitions.^a]",
+        0,
+        "partitions.a.cpus",
+        "partition `a` runs on CPUs 0 and 1, but time partition 1 has no window on CPU 0: its threads there would never run (add a window with `cpu = 0`)",
+    );
+    let src = doc(&[
+        ("memory = \"512MiB\"", "memory = \"512MiB\"\ncpus = 3"),
+        ("# a", "cpus = [0, 2]"),
+        ("duration = \"2ms\"", "duration = \"2ms\"\ncpu = 1"),
+    ]);
+    expect_one(
+        &src,
+        "cpu = ^1",
+        0,
+        "schedules[0].windows[0].cpu",
+        "partition `a` runs on CPUs 0 and 2; this window is on CPU 1 (a partition's windows are in the schedule of one of its CPUs)",
+    );
+}
+
+#[test]
+fn a_partitions_cpu_list_is_not_empty_and_names_each_cpu_once() {
+    let src = two_cpus(&[("# a", "cpus = [1, 1]")]);
+    expect_one(
+        &src,
+        "cpus = [1, ^1]",
         0,
         "partitions.a.cpus[1]",
-        "partition `a` lists 2 CPUs; a partition runs on one CPU: give one, e.g. `cpus = [0]`",
+        "partition `a` lists CPU 1 twice",
     );
     let src = two_cpus(&[("# a", "cpus = []")]);
     expect_one(
@@ -1930,7 +2008,7 @@ fn a_partition_runs_on_one_cpu() {
         "cpus = ^[]",
         0,
         "partitions.a.cpus",
-        "partition `a` names no CPU; a partition runs on one CPU: give it, e.g. `cpus = [0]`",
+        "partition `a` names no CPU: give at least one, e.g. `cpus = [0]`",
     );
 }
 

@@ -228,10 +228,57 @@ fn thread_lifecycle_and_stale_ids() {
 }
 
 #[test]
+fn a_partitions_threads_move_only_to_its_online_cpus() {
+    let mut f = Fixture::new();
+    f.k.online = 3;
+    let root = f.thread(ROOT, 200);
+    assert_eq!(f.sys(root, Call::RpCreate, [2, 4, 16, 0b110, 0, 0]), OK);
+    let rp = f.k.threads[root].context().rdi;
+    assert_eq!(f.sys(root, Call::RpInfo, [rp, 0, 0, 0, 0, 0]), OK);
+    assert_eq!(f.k.threads[root].context().r10, 0b110);
+    let rp = f.k.resource_partition(ROOT, rp).unwrap();
+    let task =
+        f.k.create_task(ROOT, Abilities::NATIVE_SYSCALLS, 100, rp, "p")
+            .unwrap();
+    let t = f.thread(task, 50);
+    let cpu = |n| [0, ThreadAttribute::Cpu as u64, n, 0, 0, 0];
+    assert_eq!(f.sys(t, Call::ThreadSet, cpu(2)), OK, "its own CPU 2");
+    assert_eq!(f.k.threads[t].cpu(), 2);
+    assert_eq!(
+        f.sys(t, Call::ThreadSet, cpu(0)),
+        err(Error::NotPermitted),
+        "not its CPU"
+    );
+    assert_eq!(
+        f.sys(t, Call::ThreadSet, cpu(3)),
+        err(Error::InvalidArgument),
+        "offline"
+    );
+    assert_eq!(
+        f.k.threads[t].cpu(),
+        2,
+        "a refused move leaves it where it was"
+    );
+    assert_eq!(
+        f.sys(
+            root,
+            Call::ThreadSet,
+            [f.id(t), ThreadAttribute::Cpu as u64, 0, 0, 0, 0]
+        ),
+        err(Error::NotPermitted),
+        "not even its creator moves it off its partition's CPUs"
+    );
+    assert_eq!(
+        f.sys(root, Call::RpCreate, [1, 1, 1, 0, 0, 0]),
+        err(Error::InvalidArgument)
+    );
+}
+
+#[test]
 fn exhausting_one_partition_leaves_the_other_working() {
     let mut f = Fixture::new();
     let root = f.thread(ROOT, 200);
-    let quota = |threads, pages| [2, threads, pages, 0, 0, 0];
+    let quota = |threads, pages| [2, threads, pages, 0xff, 0, 0];
     assert_eq!(f.sys(root, Call::RpCreate, quota(2, 8)), OK);
     let a = f.k.threads[root].context().rdi;
     assert_eq!(f.sys(root, Call::RpCreate, quota(2, 8)), OK);
@@ -1387,7 +1434,7 @@ proptest::proptest! {
     ) {
         let mut f = Fixture::new();
         f.thread(ROOT, 200);
-        let rp = f.k.rp_create(ROOT, Amount { tasks: 4, threads: 8, pages: 64 }).unwrap();
+        let rp = f.k.rp_create(ROOT, Amount { tasks: 4, threads: 8, pages: 64 }, u8::MAX.into()).unwrap();
         let child = f
             .k
             .create_task(ROOT, Abilities::CREATE_THREAD | Abilities::CREATE_TASK | Abilities::MAP, 100, rp, "c")
@@ -1462,7 +1509,7 @@ proptest::proptest! {
         let partition = Abilities::CREATE_THREAD | Abilities::CREATE_TASK | Abilities::MAP | Abilities::DEBUG_LOG | Abilities::NATIVE_SYSCALLS;
         let mut tops = Vec::new();
         for i in 0..2u64 {
-            let rp = f.k.rp_create(ROOT, Amount { tasks: 4, threads: 6, pages: 64 }).unwrap();
+            let rp = f.k.rp_create(ROOT, Amount { tasks: 4, threads: 6, pages: 64 }, u8::MAX.into()).unwrap();
             let top = f.k.create_task(ROOT, partition, 100, rp, "p").unwrap();
             f.give(top, 0x40_0000, 8, PageRights::WRITE);
             f.give(top, 0x80_0000 + i * 0x10_0000, 4, PageRights::WRITE | PageRights::EXECUTE);

@@ -68,6 +68,8 @@ pub struct ResourcePartition {
     pub used: Amount,
     /// Handed on to partitions created from this one.
     pub carved: Amount,
+    /// Bit n: its threads may run on CPU n.
+    pub cpus: u8,
 }
 
 impl ResourcePartition {
@@ -77,6 +79,7 @@ impl ResourcePartition {
         quota: Amount::tasks(0),
         used: Amount::tasks(0),
         carved: Amount::tasks(0),
+        cpus: 0,
     };
 
     pub fn new(owner: TaskIdx, quota: Amount) -> Self {
@@ -86,6 +89,7 @@ impl ResourcePartition {
             quota,
             used: Amount::default(),
             carved: Amount::default(),
+            cpus: u8::MAX,
         }
     }
 
@@ -107,13 +111,21 @@ impl ResourcePartition {
         self.used = self.used.minus(amount);
     }
 
-    /// Moves `quota` of the free quota into a new partition owned by `owner`.
-    pub fn carve(&mut self, owner: TaskIdx, quota: Amount) -> Result<Self, Error> {
+    /// Moves `quota` of the free quota into a new partition owned by `owner` whose threads
+    /// run on `cpus`, some of this one's.
+    pub fn carve(&mut self, owner: TaskIdx, quota: Amount, cpus: u64) -> Result<Self, Error> {
+        let cpus = u8::try_from(cpus)
+            .ok()
+            .filter(|&c| c != 0 && c & !self.cpus == 0);
+        let cpus = cpus.ok_or(Error::InvalidArgument)?;
         if !quota.fits_in(self.free()) {
             return Err(Error::QuotaExceeded);
         }
         self.carved = self.carved.plus(quota);
-        Ok(Self::new(owner, quota))
+        Ok(Self {
+            cpus,
+            ..Self::new(owner, quota)
+        })
     }
 }
 
@@ -130,10 +142,10 @@ impl Kernel {
         }
     }
 
-    pub fn rp_create(&mut self, caller_task: TaskIdx, quota: Amount) -> Result<RpIdx, Error> {
+    pub fn rp_create(&mut self, task: TaskIdx, quota: Amount, cpus: u64) -> Result<RpIdx, Error> {
         let slot = self.rps.find(|r| !r.in_use).ok_or(Error::OutOfResources)?;
-        let own = self.tasks[caller_task].rp();
-        self.rps[slot] = self.rps[own].carve(caller_task, quota)?;
+        let own = self.tasks[task].rp();
+        self.rps[slot] = self.rps[own].carve(task, quota, cpus)?;
         Ok(slot)
     }
 }

@@ -597,6 +597,7 @@ fn rp_create(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
             threads: a.threads,
             pages: a.pages,
         },
+        a.cpus,
     )?;
     let rp = rp.position() as u64 + 1;
     k.threads[t].set_results(|r| results::RpCreate { rp }.encode_into(r));
@@ -615,6 +616,7 @@ fn rp_info(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
             tasks_used: used.tasks as u16,
             tasks_quota: quota.tasks as u16,
         },
+        cpus: k.rps[rp].cpus.into(),
     };
     k.threads[t].set_results(|r| info.encode_into(r));
     Ok(Next::Return)
@@ -807,10 +809,7 @@ fn set_attribute(
                 u8::try_from(value).map_err(|_| Error::InvalidArgument)?,
             )
         }
-        ThreadAttribute::Cpu => {
-            k.require(caller_task, Abilities::SCHEDULING)?;
-            k.set_cpu(target, value)
-        }
+        ThreadAttribute::Cpu => k.set_cpu(target, value),
         ThreadAttribute::FollowsCallers => {
             k.require(caller_task, Abilities::SCHEDULING)?;
             k.threads[target].follows_callers = match value {

@@ -568,9 +568,10 @@ impl Kernel {
         if cpu >= self.online as u64 {
             return Err(Error::InvalidArgument);
         }
+        let allowed = self.rps[self.tasks[self.threads[t].task()].rp()].cpus;
         let elsewhere =
             |(c, core): (usize, &crate::state::Core)| c != self.cpu && core.current == Some(t);
-        if self.cores.iter().enumerate().any(elsewhere) {
+        if allowed & 1 << cpu == 0 || self.cores.iter().enumerate().any(elsewhere) {
             return Err(Error::NotPermitted);
         }
         self.run.remove(t.position());

@@ -228,7 +228,7 @@ fn log_partition(p: &config::binary::PartitionView, used: u64, cpus: u8) {
         "syssw: partition {}: {}{}, MCP {}, priority {}, memory {}/{} KiB, kernel memory {} KiB, {} I/O range(s), irqs {:?}",
         p.name,
         TimePartition(p.time_partition),
-        OnCpu((cpus > 1).then_some(p.cpu)),
+        OnCpu((cpus > 1).then_some(p.cpus)),
         p.mcp,
         p.priority,
         used / 1024,
@@ -239,15 +239,21 @@ fn log_partition(p: &config::binary::PartitionView, used: u64, cpus: u8) {
     );
 }
 
-/// ` on CPU c`, or nothing (a system of one CPU).
+/// ` on CPU 1`, ` on CPUs 1,2` for a CPU mask (nothing on a one-CPU system).
 struct OnCpu(Option<u8>);
 
 impl core::fmt::Display for OnCpu {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        match self.0 {
-            Some(cpu) => write!(f, " on CPU {cpu}"),
-            None => Ok(()),
+        let Some(mask) = self.0 else {
+            return Ok(());
+        };
+        let plural = if mask.is_power_of_two() { "" } else { "s" };
+        write!(f, " on CPU{plural} ")?;
+        let mut cpus = (0..8).filter(|c| mask & 1 << c != 0);
+        if let Some(first) = cpus.next() {
+            write!(f, "{first}")?;
         }
+        cpus.try_for_each(|c| write!(f, ",{c}"))
     }
 }
 

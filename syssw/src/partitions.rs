@@ -291,6 +291,7 @@ fn place(
             p.kernel_tasks as u16,
             p.kernel_threads as u16,
             p.kernel_memory / PAGE,
+            p.cpus,
         ),
     )?;
     let mut frames = [0u64; MAX_SEGMENTS];
@@ -469,10 +470,13 @@ fn instantiate(
             p.time_partition as u64,
         ),
     )?;
-    // Its CPU: the threads it creates run there too (a new thread runs on its creator's).
-    sys::thread_set(Some(thread), ThreadAttribute::Cpu, p.cpu as u64).map_err(|e| match e {
-        Error::InvalidArgument => LoadError::CpuOffline(p.cpu),
-        e => LoadError::Kernel("thread_set Cpu", e),
-    })?;
+    // Its first CPU, the last one it is moved to: the threads it creates start there too
+    // (a new thread runs on its creator's). Each of its CPUs must be online.
+    for cpu in (0..8u8).rev().filter(|c| p.cpus & 1 << c != 0) {
+        sys::thread_set(Some(thread), ThreadAttribute::Cpu, cpu.into()).map_err(|e| match e {
+            Error::InvalidArgument => LoadError::CpuOffline(cpu),
+            e => LoadError::Kernel("thread_set Cpu", e),
+        })?;
+    }
     Ok(Instance { task, thread })
 }

@@ -187,7 +187,7 @@ call_args! {
     /// `notify_wait`.
     NotifyWait { mask: u64 = rdi, timeout: u64 = rsi }
     /// `rp_create`.
-    RpCreate { tasks: u64 = rdi, threads: u64 = rsi, pages: u64 = rdx }
+    RpCreate { tasks: u64 = rdi, threads: u64 = rsi, pages: u64 = rdx, cpus: u64 = r10 }
     /// `rp_info`.
     RpInfo { rp: u64 = rdi }
     /// `set_health_monitor`.
@@ -261,8 +261,8 @@ call_results! {
     NotifyWait { bits: u64 = rdi }
     /// `rp_create`: the new resource partition's number.
     RpCreate { rp: u64 = rdi }
-    /// `rp_info`: page use and quota, thread and task counts.
-    RpInfo { pages_used: u64 = rdi, pages_quota: u64 = rsi, counts: RpCounts = rdx }
+    /// `rp_info`: page use and quota, thread and task counts, CPU mask.
+    RpInfo { pages_used: u64 = rdi, pages_quota: u64 = rsi, counts: RpCounts = rdx, cpus: u64 = r10 }
     /// `schedule_switch`: when the schedule takes effect (ns since boot).
     ScheduleSwitch { at: u64 = rdi }
     /// `partition_info`: see [`Call::PartitionInfo`](crate::syscall::Call::PartitionInfo).

@@ -228,13 +228,16 @@ codes::code_enum! {
         /// Errors: `TimedOut`.
         NotifyWait = 51 => "notify_wait",
 
-        /// `rp_create(tasks, threads, pages) -> rdi = rp`: a new resource partition with the
-        /// given quota, carved out of the caller's partition's free quota. Ability:
-        /// `PARTITION_CONTROL`. Errors: `QuotaExceeded`, `OutOfResources` (all partition slots
-        /// used).
+        /// `rp_create(tasks, threads, pages, cpus) -> rdi = rp`: a new resource partition with
+        /// the given quota, carved out of the caller's partition's free quota, whose threads
+        /// may run on the CPUs of mask `cpus` (bit n: CPU n), a non-empty subset of the
+        /// caller's partition's (the root partition's: all 8). Ability: `PARTITION_CONTROL`.
+        /// Errors: `QuotaExceeded`, `OutOfResources` (all partition slots used),
+        /// `InvalidArgument` (`cpus` empty or not a subset).
         RpCreate = 60 => "rp_create",
         /// `rp_info(rp) -> rdi = pages used, rsi = pages quota, rdx = threads used | threads
-        /// quota << 16 | tasks used << 32 | tasks quota << 48` (0 = the caller's partition).
+        /// quota << 16 | tasks used << 32 | tasks quota << 48, r10 = its CPU mask (as
+        /// `rp_create`'s)` (0 = the caller's partition).
         /// Errors: `NoSuchObject`.
         RpInfo = 61 => "rp_info",
         /// `set_health_monitor(thread)`: a thread of the root task that receives
@@ -422,10 +425,11 @@ codes::code_enum! {
         /// one number per thread.
         SyscallAnswer = 7 => "syscall_answer",
         /// The CPU the thread runs on: an online one (0 = the boot CPU; else
-        /// `InvalidArgument`). It moves at once, unless another CPU is running it
+        /// `InvalidArgument`) of its task's resource partition's CPU mask (else
+        /// `NotPermitted`). It moves at once, unless another CPU is running it
         /// (`NotPermitted`: set it while it waits, or from its own CPU). A new thread runs
         /// on its creator's CPU. Its time partition's windows are those of this CPU's
-        /// schedule; the background runs on every CPU. Needs `SCHEDULING`.
+        /// schedule; the background runs on every CPU.
         Cpu = 8 => "cpu",
         /// 1: the thread moves to the CPU of each thread whose message it takes, so a
         /// server's work runs on its caller's CPU, in its caller's windows there, never in

@@ -384,11 +384,14 @@ pub fn sleep(ns: u64) {
     let _ = notify_wait(0, ns);
 }
 
-pub fn rp_create(tasks: u16, threads: u16, pages: u64) -> Result<u64, Error> {
+/// A resource partition with the quota given whose threads may run on the CPUs of mask
+/// `cpus` (some of the caller's partition's: [`RpUsage::cpus`]).
+pub fn rp_create(tasks: u16, threads: u16, pages: u64, cpus: u8) -> Result<u64, Error> {
     let a = args::RpCreate {
         tasks: tasks as u64,
         threads: threads as u64,
         pages,
+        cpus: cpus.into(),
     };
     call(Call::RpCreate, a.encode()).map(|r| results::RpCreate::decode(&r).rp)
 }
@@ -402,6 +405,8 @@ pub struct RpUsage {
     pub threads_quota: u16,
     pub tasks_used: u16,
     pub tasks_quota: u16,
+    /// Bit n: its threads may run on CPU n.
+    pub cpus: u8,
 }
 
 pub fn rp_info(rp: u64) -> Result<RpUsage, Error> {
@@ -414,6 +419,7 @@ pub fn rp_info(rp: u64) -> Result<RpUsage, Error> {
             threads_quota: r.counts.threads_quota,
             tasks_used: r.counts.tasks_used,
             tasks_quota: r.counts.tasks_quota,
+            cpus: r.cpus as u8,
         }
     })
 }

@@ -20,6 +20,8 @@ const A_PAGES: u64 = 16;
 const B_TASKS: u16 = 2;
 const B_THREADS: u16 = 4;
 const B_PAGES: u64 = 64;
+/// The root task's partition may run on every CPU; so may the partitions it makes here.
+const ALL_CPUS: u8 = u8::MAX;
 
 pub fn run() {
     let mut lab = Lab::new();
@@ -36,16 +38,26 @@ pub fn run() {
     );
     expect_err(
         "rp_create with more pages than the caller's free quota is QuotaExceeded",
-        sys::rp_create(1, 1, root.pages_quota + 1),
+        sys::rp_create(1, 1, root.pages_quota + 1, ALL_CPUS),
         Error::QuotaExceeded,
     );
     if let Some(threads) = (root.threads_quota - root.threads_used).checked_add(1) {
         expect_err(
             "rp_create with more threads than the caller's free quota is QuotaExceeded",
-            sys::rp_create(1, threads, 1),
+            sys::rp_create(1, threads, 1, ALL_CPUS),
             Error::QuotaExceeded,
         );
     }
+    expect_eq(
+        "the root partition may run on every CPU",
+        root.cpus,
+        ALL_CPUS,
+    );
+    expect_err(
+        "rp_create on no CPU is InvalidArgument",
+        sys::rp_create(1, 1, 1, 0),
+        Error::InvalidArgument,
+    );
     expect_err(
         "rp_info of a nonexistent partition is NoSuchObject",
         sys::rp_info(BOGUS_ID),
@@ -54,11 +66,11 @@ pub fn run() {
 
     let a = expect_ok(
         "rp_create of partition A",
-        sys::rp_create(A_TASKS, A_THREADS, A_PAGES),
+        sys::rp_create(A_TASKS, A_THREADS, A_PAGES, ALL_CPUS),
     );
     let b = expect_ok(
         "rp_create of partition B",
-        sys::rp_create(B_TASKS, B_THREADS, B_PAGES),
+        sys::rp_create(B_TASKS, B_THREADS, B_PAGES, ALL_CPUS),
     );
     expect(
         "new partitions have their own numbers",
@@ -83,7 +95,7 @@ pub fn run() {
     let free_before = root.pages_quota - root.pages_used;
     expect_err(
         "carving partitions reduces the root's free quota",
-        sys::rp_create(0, 0, free_before - A_PAGES - B_PAGES + 1),
+        sys::rp_create(0, 0, free_before - A_PAGES - B_PAGES + 1, ALL_CPUS),
         Error::QuotaExceeded,
     );
 
@@ -247,7 +259,7 @@ worker!(
     /// Runs in partition B (no PARTITION_CONTROL).
     fn b_probe(b, ipc) {
         b.set_result(B_RAN, 1);
-        b.set_code(B_RP_CREATE, &sys::rp_create(1, 1, 1));
+        b.set_code(B_RP_CREATE, &sys::rp_create(1, 1, 1, ALL_CPUS));
         let info = sys::rp_info(0);
         b.set_code(B_RP_INFO, &info);
         b.set_result(B_RP_PAGES_QUOTA, info.map_or(0, |i| i.pages_quota));
@@ -266,7 +278,7 @@ worker!(
             C_FOREIGN,
             &sys::task_create(Abilities::DEBUG_LOG, 10, b.arg(0), "foreign"),
         );
-        let own = sys::rp_create(1, 1, 4);
+        let own = sys::rp_create(1, 1, 4, ALL_CPUS);
         b.set_code(C_CREATE, &own);
         if let Ok(rp) = own {
             let t = sys::task_create(Abilities::DEBUG_LOG, 10, rp, "own");
