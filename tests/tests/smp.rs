@@ -1,7 +1,7 @@
 //! Multicore scenarios: the application processors beside the ordinary system.
 
 use crate::attack::LATENESS_BOUND_NS;
-use scenarios::{boot, check, passes};
+use scenarios::{boot, check, guest_stdout, partition_lines, passes};
 
 /// `name=<number>` in a summary line.
 fn field(line: &str, name: &str) -> Option<u64> {
@@ -161,5 +161,46 @@ fn smp_partitions() {
         &o,
         times.len() == 4 && (150_000..=220_000).contains(&times[1]),
         "windows-a did not get its 50 windows of 4 ms on CPU 0",
+    );
+}
+
+/// A guest on two CPUs (`tests/configs/guest_smp.toml`, script `tests/configs/guest/smp.sh`):
+/// every line the script prints, then its exit status.
+#[test]
+fn guest_smp() {
+    const EXPECTED: &[&str] = &[
+        "nproc 2",
+        "cpuinfo 2",
+        "mask 3",
+        "pinned 0 0",
+        "pinned 1 1",
+        "no CPU 5: 1",
+        "spread",
+        "gzipped 8",
+        "intact 8",
+    ];
+    let o = boot("guest_smp");
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        &o,
+        o.line("syssw: partition shell: background on CPUs 0,1")
+            .is_some(),
+        "syssw did not start the guest on CPUs 0 and 1",
+    );
+    let printed = guest_stdout(&o, "shell");
+    check(
+        &o,
+        printed == EXPECTED,
+        &format!("printed {printed:#?}, expected {EXPECTED:#?}"),
+    );
+    let lines = partition_lines(&o, "shell", "");
+    for needle in ["unsupported system call", "killed by signal"] {
+        let found: Vec<&String> = lines.iter().filter(|l| l.contains(needle)).collect();
+        check(&o, found.is_empty(), &format!("{needle:?}: {found:?}"));
+    }
+    check(
+        &o,
+        o.line("guest: init exited with status 7").is_some(),
+        "the script did not end with its status 7",
     );
 }

@@ -1,7 +1,7 @@
 //! The calls that report on or set a process's identity and resources, where the guest
-//! has one user (root), one CPU and no accounting: the user and group ids, `getrusage`,
-//! `times`, the scheduling affinity and priority, plus `sysinfo`'s record
-//! ([`sysinfo_record`]). `futex` is the process table's ([`crate::system`]).
+//! has one user (root) and no accounting: the user and group ids, `getrusage`, `times`,
+//! the scheduling priority, plus `sysinfo`'s record ([`sysinfo_record`]). `futex` and the
+//! scheduling affinity are the process table's ([`crate::system`]).
 
 use crate::linux::Errno;
 use crate::syscall::table::Ctx;

@@ -24,6 +24,13 @@
 //! message and answer, asks it at every turn and when it said a decision is due, and sets
 //! the priorities it names with `thread_set`).
 //!
+//! The CPUs: the guest's are its resource partition's (`rp_info`); its own thread runs on
+//! the lowest and serves every CPU's processes. The library places each new thread
+//! ([`guest::system`]); this file moves it there with `thread_set` of its CPU before it
+//! starts, and moves a thread later only while it waits for the guest (its message being
+//! served or its call waiting): a thread that may be running elsewhere is interrupted and
+//! moved at the message that brings. A one-CPU guest makes no such call.
+//!
 //! The console: with `guest.console = "com2"` (the initramfs's `/etc/guest/console`) the
 //! processes' console is a terminal ([`guest::tty`]) on COM2 ([`com2`]); without it, their
 //! output lines go to the log and reading the console gives end of file.
@@ -66,8 +73,8 @@ use user_rt::abi::ipc::{
     MessageTag, REPLY_RESUME,
 };
 use user_rt::abi::syscall::{
-    Abilities, MAP_MAX_PAGES, PageRights, TIMEOUT_INFINITE, TaskId, ThreadAttribute, ThreadId,
-    syscall_answer,
+    Abilities, Error as SysError, MAP_MAX_PAGES, PageRights, TIMEOUT_INFINITE, TaskId,
+    ThreadAttribute, ThreadId, syscall_answer,
 };
 use user_rt::ipc_buffer::IpcBufferRef;
 use user_rt::partition::{POOL_BASE, POOL_EXEC_BASE, StartInfo};
@@ -153,6 +160,16 @@ fn main(start: u64, _: u64) {
     // first IPC_PAGES pages are used only through this IpcBufferRef.
     let ipc = unsafe { IpcBufferRef::new(POOL_BASE) };
     let (me, _) = sys::thread_self();
+    // The CPUs its processes' threads may run on; this thread runs on the lowest (syssw
+    // starts it there), so every thread it creates starts there too.
+    let cpus = match sys::rp_info(0) {
+        Ok(usage) if usage.cpus != 0 => u64::from(usage.cpus),
+        other => {
+            println!("guest: its partition's CPUs are unknown ({other:?}): one CPU");
+            1
+        }
+    };
+    let home = cpus.trailing_zeros();
     if let Err(e) = sys::thread_set(None, ThreadAttribute::IpcBuffer, ipc.address()) {
         println!("guest: cannot register its IPC buffer: {e:?}");
         return;
@@ -208,6 +225,16 @@ fn main(start: u64, _: u64) {
         }
     };
     fs.set_memory(info.pool_len);
+    // Only a guest with several CPUs has /sys: a one-CPU guest's file system stays as it
+    // was (the C libraries then count the CPUs with `sched_getaffinity`).
+    if cpus.count_ones() > 1
+        && let Err(e) = fs.set_cpus(cpus)
+    {
+        println!(
+            "guest: no room for /sys/devices/system/cpu: {}",
+            e.describe()
+        );
+    }
     // The ARINC ports of the configuration: created through syssw, devices in /dev/arinc.
     let port_table = match archive
         .get(guest::arinc::PORTS_PATH)
@@ -273,7 +300,10 @@ fn main(start: u64, _: u64) {
         tty: None,
         ports,
         port_waiting: false,
-        sched: Scheduler::new(0),
+        sched: Scheduler::with_cpus(0, cpus),
+        cpus,
+        home,
+        moves_pending: false,
         levels_set: 0,
         new_thread: true,
         deferred: None,
@@ -300,28 +330,30 @@ fn main(start: u64, _: u64) {
             return;
         }
     };
-    host.tasks[0] = Some(Task::new(INIT_PID, task));
+    host.tasks[0] = Some(Task::new(INIT_PID, task, home));
     let argv = &args[..argc];
-    let loaded = match guest::exec::load(&fs, &mut host, INIT_PID, 0, argv, &env[..envc], hwcap()) {
-        Ok(l) => l,
-        Err(e) => {
-            let path = argv
-                .first()
-                .map_or("", |p| core::str::from_utf8(p).unwrap_or("?"));
-            println!("guest: cannot start {path}: {e}");
-            host.release(INIT_PID);
-            report(ipc, Outcome::Exit(127));
-            return;
-        }
-    };
+    let mut loaded =
+        match guest::exec::load(&fs, &mut host, INIT_PID, 0, argv, &env[..envc], hwcap()) {
+            Ok(l) => l,
+            Err(e) => {
+                let path = argv
+                    .first()
+                    .map_or("", |p| core::str::from_utf8(p).unwrap_or("?"));
+                println!("guest: cannot start {path}: {e}");
+                host.release(INIT_PID);
+                report(ipc, Outcome::Exit(127));
+                return;
+            }
+        };
     println!(
         "guest: process {} ({}) started: {}",
         loaded.process.pid,
         loaded.process.name(),
         Joined(argv)
     );
-    match start_thread(task, loaded.entry, loaded.sp, mcp, me) {
-        Ok(thread) => {
+    loaded.process.cpu = home;
+    match start_thread(task, loaded.entry, loaded.sp, mcp, me, None) {
+        Ok((thread, _)) => {
             if let Some(t) = host.tasks[0].as_mut() {
                 (t.thread, t.priority) = (thread, mcp);
             }
@@ -408,6 +440,9 @@ fn main(start: u64, _: u64) {
             continue;
         };
         host.sched.received(pid);
+        if host.moves_pending {
+            host.settle(pid);
+        }
         if let Some(ended) = system.serve(pid, &mut fs, &mut host, ipc.exception()) {
             break ended;
         }
@@ -556,18 +591,31 @@ fn console_input(
 }
 
 /// Creates the process's thread (the guest as its exception handler; it runs in the guest's
-/// time partition, as every thread in its creator's) and starts it.
+/// time partition, as every thread in its creator's), moves it to `cpu` if one is given
+/// (before it starts: a running thread may be on its CPU when the guest asks; without, it
+/// runs on the guest's CPU) and starts it; with how the move went (refused: it runs on the
+/// guest's CPU).
 fn start_thread(
     task: TaskId,
     entry: u64,
     sp: u64,
     priority: u8,
     handler: ThreadId,
-) -> Result<ThreadId, user_rt::abi::syscall::Error> {
+    cpu: Option<u32>,
+) -> Result<(ThreadId, Result<(), SysError>), SysError> {
     let thread = sys::thread_create(Some(task), entry, sp, priority, 0)?;
-    sys::thread_set(Some(thread), ThreadAttribute::ExceptionHandler, handler.0)?;
-    sys::thread_start(thread)?;
-    Ok(thread)
+    let moved = cpu.map_or(Ok(()), |cpu| {
+        sys::thread_set(Some(thread), ThreadAttribute::Cpu, u64::from(cpu))
+    });
+    let started = sys::thread_set(Some(thread), ThreadAttribute::ExceptionHandler, handler.0)
+        .and_then(|()| sys::thread_start(thread));
+    match started {
+        Ok(()) => Ok((thread, moved)),
+        Err(e) => {
+            let _ = sys::thread_kill(thread);
+            Err(e)
+        }
+    }
 }
 
 /// Reports the end of init to the health monitor.
@@ -648,13 +696,19 @@ struct Task {
     /// What it and its children copied on write: its next fork copies them at once.
     fork_writes: guest::frames::ForkWrites,
     out: [LineBuffer; 2],
+    /// The CPU its thread runs on, and the one it is to move to at its next message (it
+    /// was running when [`Tasks::set_cpu`] asked).
+    cpu: u32,
+    pending_cpu: Option<u32>,
 }
 
 impl Task {
-    fn new(pid: u32, task: TaskId) -> Self {
+    fn new(pid: u32, task: TaskId, cpu: u32) -> Self {
         Self {
             pid,
             task,
+            cpu,
+            pending_cpu: None,
             thread: ThreadId(0),
             priority: 0,
             memory: pid,
@@ -770,6 +824,12 @@ struct GuestHost<'p> {
     port_waiting: bool,
     /// The scheduling policy: the level of each process's thread.
     sched: Scheduler,
+    /// The guest's CPUs (bit n: CPU n), and the one its own thread runs on, where every
+    /// thread it creates starts.
+    cpus: u64,
+    home: u32,
+    /// A thread is to move to another CPU at its next message ([`Task::pending_cpu`]).
+    moves_pending: bool,
     /// The policy's generation the priorities were last set for.
     levels_set: u64,
     /// A thread was created (at `mcp`) since the priorities were last set.
@@ -796,6 +856,33 @@ impl<'p> GuestHost<'p> {
             .flatten()
             .find(|t| t.thread == thread)
             .map(|t| t.pid)
+    }
+
+    /// Creates and starts a process's thread in `task` on `cpu` (see [`start_thread`]);
+    /// with the CPU it got. A CPU the kernel refuses (not online) is logged and left out
+    /// of the guest's from then on, and the thread runs on the guest's own.
+    fn start_on(&mut self, task: TaskId, cpu: u32) -> Result<(ThreadId, u32), Errno> {
+        // With several CPUs every thread is put on its CPU, not trusting where it starts.
+        let wanted = (self.cpus.count_ones() > 1 || cpu != self.home).then_some(cpu);
+        let (thread, moved) =
+            start_thread(task, 0, 0, self.mcp, self.handler, wanted).map_err(|_| Errno::EAGAIN)?;
+        if let Err(e) = moved {
+            let home = self.home;
+            println!("guest: CPU {cpu} refused ({e:?}): threads go to CPU {home} instead");
+            self.cpus &= !(1u64 << cpu);
+            return Ok((thread, home));
+        }
+        Ok((thread, cpu))
+    }
+
+    /// Moves `pid`'s thread to the CPU it was to move to while it ran, now that its
+    /// message arrived (it waits for the answer, so the kernel lets it move).
+    fn settle(&mut self, pid: u32) {
+        let pending = self.task(pid).and_then(|t| t.pending_cpu);
+        if let Some(cpu) = pending {
+            self.set_cpu(pid, cpu);
+        }
+        self.moves_pending = self.tasks.iter().flatten().any(|t| t.pending_cpu.is_some());
     }
 
     /// Gives each process's thread the priority of its level in [`GuestHost::sched`]
@@ -1037,6 +1124,10 @@ impl Host for GuestHost<'_> {
     fn port_readiness(&mut self, port: usize) -> guest::arinc::Readiness {
         self.ports.readiness(port)
     }
+
+    fn cpus(&mut self) -> u64 {
+        self.cpus
+    }
 }
 
 impl Tasks for GuestHost<'_> {
@@ -1044,7 +1135,7 @@ impl Tasks for GuestHost<'_> {
         self.current = pid;
     }
 
-    fn fork(&mut self, child: u32, areas: &Areas) -> Result<u64, Errno> {
+    fn fork(&mut self, child: u32, areas: &Areas, cpu: u32) -> Result<u64, Errno> {
         let slot = self
             .tasks
             .iter()
@@ -1056,21 +1147,20 @@ impl Tasks for GuestHost<'_> {
         let foreseen = self.task(parent).map(|t| t.fork_writes.clone());
         self.tasks[slot] = Some(Task {
             parent,
-            ..Task::new(child, task)
+            ..Task::new(child, task, self.home)
         });
         let (frames, mut spaces, parent) = self.memory();
         let rights = |page| areas.find(page).map(|a| a.rights);
         let foreseen = foreseen.as_ref().map_or(&[][..], |w| w.pages());
         let copied = frames.share(&mut spaces, parent, child, rights, foreseen);
         // The thread starts at address 0: its fetch fault asks the guest for the registers.
-        let thread = copied.and_then(|_| {
-            start_thread(task, 0, 0, self.mcp, self.handler).map_err(|_| Errno::EAGAIN)
-        });
+        let thread = copied.and_then(|_| self.start_on(task, cpu));
         match thread {
-            Ok(thread) => {
+            Ok((thread, cpu)) => {
                 if let Some(t) = self.tasks[slot].as_mut() {
-                    (t.thread, t.priority) = (thread, self.mcp);
+                    (t.thread, t.priority, t.cpu) = (thread, self.mcp, cpu);
                 }
+                self.sched.set_cpu(child, cpu);
                 self.new_thread = true;
                 copied
             }
@@ -1081,7 +1171,7 @@ impl Tasks for GuestHost<'_> {
         }
     }
 
-    fn borrow(&mut self, child: u32, parent: u32) -> Result<(), Errno> {
+    fn borrow(&mut self, child: u32, parent: u32, cpu: u32) -> Result<(), Errno> {
         let slot = self
             .tasks
             .iter()
@@ -1090,18 +1180,19 @@ impl Tasks for GuestHost<'_> {
         let owner = self.task(parent).ok_or(Errno::ESRCH)?;
         let (task, memory) = (owner.task, owner.memory);
         // The thread starts at address 0: its fetch fault asks the guest for the registers.
-        let thread = start_thread(task, 0, 0, self.mcp, self.handler).map_err(|_| Errno::EAGAIN)?;
+        let (thread, cpu) = self.start_on(task, cpu)?;
         self.tasks[slot] = Some(Task {
             thread,
             priority: self.mcp,
             memory,
-            ..Task::new(child, task)
+            ..Task::new(child, task, cpu)
         });
+        self.sched.set_cpu(child, cpu);
         self.new_thread = true;
         Ok(())
     }
 
-    fn own(&mut self, pid: u32) -> Result<bool, Errno> {
+    fn own(&mut self, pid: u32, cpu: u32) -> Result<bool, Errno> {
         let Some(slot) = self
             .tasks
             .iter()
@@ -1111,17 +1202,19 @@ impl Tasks for GuestHost<'_> {
         };
         let task = sys::task_create(Abilities::empty(), self.mcp, 0, "process")
             .map_err(|_| Errno::EAGAIN)?;
-        let thread = match start_thread(task, 0, 0, self.mcp, self.handler) {
-            Ok(thread) => thread,
-            Err(_) => {
+        let (thread, cpu) = match self.start_on(task, cpu) {
+            Ok(started) => started,
+            Err(e) => {
                 let _ = sys::task_kill(task);
-                return Err(Errno::EAGAIN);
+                return Err(e);
             }
         };
         if let Some(t) = self.tasks[slot].as_mut() {
             let _ = sys::thread_kill(t.thread);
             (t.task, t.thread, t.priority, t.memory) = (task, thread, self.mcp, pid);
+            (t.cpu, t.pending_cpu) = (cpu, None);
         }
+        self.sched.set_cpu(pid, cpu);
         self.new_thread = true;
         Ok(true)
     }
@@ -1176,6 +1269,32 @@ impl Tasks for GuestHost<'_> {
             sys::thread_resume(thread)
         };
         self.sched.stopped(pid, stop);
+    }
+
+    /// At once for a thread that waits for the guest (the kernel moves a thread no CPU
+    /// runs); one that runs (`sched_setaffinity` of another thread) is interrupted, and
+    /// moves at the message that brings ([`GuestHost::settle`]). Not flushed first: the
+    /// deferred reply may be this thread's, which must not run before it moved.
+    fn set_cpu(&mut self, pid: u32, cpu: u32) {
+        let Some(t) = self.tasks.iter_mut().flatten().find(|t| t.pid == pid) else {
+            return;
+        };
+        t.pending_cpu = None;
+        if t.cpu == cpu || t.thread == ThreadId(0) {
+            return;
+        }
+        match sys::thread_set(Some(t.thread), ThreadAttribute::Cpu, u64::from(cpu)) {
+            Ok(()) => {
+                t.cpu = cpu;
+                self.sched.set_cpu(pid, cpu);
+            }
+            Err(user_rt::abi::syscall::Error::NotPermitted) => {
+                t.pending_cpu = Some(cpu);
+                self.moves_pending = true;
+                let _ = sys::thread_interrupt(t.thread);
+            }
+            Err(e) => println!("guest: cannot move process {pid} to CPU {cpu}: {e:?}"),
+        }
     }
 
     /// Deferred to the next receive ([`GuestHost::receive`]), which replies and waits in

@@ -199,6 +199,11 @@ pub struct Process {
     pub locks: crate::memory::Locks,
     /// `mlockall(MCL_FUTURE)` is in force (recorded; new mappings are not counted).
     pub lock_future: bool,
+    /// The CPU its thread runs on (one of the guest's: [`crate::system`] places it).
+    pub cpu: u32,
+    /// The CPUs `sched_setaffinity` allows it (bit n: CPU n; all at first), inherited by
+    /// the processes and threads it creates and kept by `execve`, as on Linux.
+    pub affinity: u64,
 }
 
 impl Process {
@@ -249,6 +254,8 @@ impl Process {
             futex: None,
             locks: Default::default(),
             lock_future: false,
+            cpu: 0,
+            affinity: u64::MAX,
         }
     }
 
@@ -271,6 +278,8 @@ impl Process {
             tgid: self.tgid,
             name: self.name,
             name_len: self.name_len,
+            cpu: self.cpu,
+            affinity: self.affinity,
             ..Self::new(tid, self.ppid, self.exe)
         }
     }
@@ -281,7 +290,7 @@ impl Process {
     /// umask, memory locks, the alarm, the identity. What is each thread's own stays: its
     /// id, name (`comm`: a thread starts with its creator's, `PR_SET_NAME` renames only
     /// itself, as on Linux), signal mask and pending thread-directed signals, alternate
-    /// stack, sleep, futex wait, tid addresses and robust list.
+    /// stack, sleep, futex wait, tid addresses, robust list, CPU and affinity.
     pub fn swap_shared(&mut self, other: &mut Self) {
         use core::mem::swap;
         swap(&mut self.ppid, &mut other.ppid);

@@ -1,5 +1,6 @@
 //! The guest's scheduling policy: which of three priorities each Linux process's thread
-//! runs at, so that processes that wait (for a pipe, the console, a child, a timer, a port)
+//! runs at (on each of the guest's CPUs), and on which CPU a new thread goes ([`place`]), so
+//! that processes that wait (for a pipe, the console, a child, a timer, a port)
 //! run as soon as they may, while processes that keep the CPU share it in turn and are
 //! never starved for ever. Pure decisions over pids and times; the partition program
 //! (`main.rs`) reports what happens to the processes' threads ([`Scheduler::received`],
@@ -76,6 +77,19 @@
 //! the guest's work for it, so a slice is one of wall-clock time while the process was
 //! the one to run.
 //!
+//! **Several CPUs.** A guest bound to several CPUs has its processes' threads on each
+//! (placed by [`place`] from the process table, [`crate::system`]; this module only learns
+//! where each runs: [`Scheduler::set_cpu`]), and the kernel schedules each CPU's threads
+//! by their priorities there. So the policy is per CPU: each CPU has its own model of who
+//! runs, its own turn holder and turn order among the CPU-bound threads placed on it, its
+//! own aging and slice ends; two CPU-bound processes on two CPUs each hold their CPU's
+//! turn and both run all the time. What happens on one CPU is charged there: between two
+//! looks the sender of the message ran on its CPU, and on every other CPU the model's
+//! choice there ran (one CPU's messages say nothing about another's spinner). The guest's
+//! own thread stays on its CPU and serves every CPU's messages; the decisions are the same
+//! as before for each CPU, made in a pass per CPU when a decision is remade. A one-CPU
+//! guest is the policy above unchanged.
+//!
 //! **Cost.** A message that changes nothing but the sender's debt (a call answered at
 //! once) costs two lookups in the table and a comparison; the decisions are remade only
 //! when a process waits, is woken, starts, ends or uses up its slice, or a decision is due.
@@ -88,6 +102,22 @@ pub const SLICE_NS: u64 = 10_000_000;
 /// How long the CPU-bound process whose turn it is may go without the CPU while
 /// interactive processes keep it busy, before it runs a slice beside them.
 pub const STARVATION_NS: u64 = 10 * SLICE_NS;
+/// Most CPUs a guest may have: a resource partition's CPU mask has 8 bits (CPU 0..7).
+pub const MAX_CPUS: usize = 8;
+
+/// The runnable threads (running, or ready: not waiting in a call, not stopped) on each
+/// CPU, by CPU number: what [`place`] balances.
+pub type Load = [u16; MAX_CPUS];
+
+/// The CPU of `allowed` (bit n: CPU n) with the fewest runnable threads in `load`; of
+/// equals, `prefer` (the creator's CPU for a new thread, its own for a woken one), else the
+/// lowest. An empty `allowed` (no CPU of the guest) keeps `prefer`.
+pub fn place(allowed: u64, prefer: u32, load: &Load) -> u32 {
+    (0..MAX_CPUS as u32)
+        .filter(|&cpu| allowed >> cpu & 1 != 0)
+        .min_by_key(|&cpu| (load[cpu as usize], cpu != prefer, cpu))
+        .unwrap_or(prefer)
+}
 
 /// A process's scheduling level; each is one priority below the one before.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -114,6 +144,11 @@ impl Level {
 #[derive(Clone, Copy, Debug)]
 struct Entry {
     pid: u32,
+    /// The CPU its thread runs on (its turn and its place in the model are that CPU's).
+    cpu: u8,
+    /// Placed ([`Scheduler::set_cpu`]) before its first answer: it holds only its CPU until
+    /// then, as if it were not in the table (a new thread joins at its first answer).
+    fresh: bool,
     /// Ran a whole slice more than it waited: it runs in turns.
     cpu_bound: bool,
     /// Its message was received and is not answered yet.
@@ -139,7 +174,7 @@ struct Entry {
 
 impl Entry {
     fn runnable(&self) -> bool {
-        !self.in_call && !self.stopped
+        !self.in_call && !self.stopped && !self.fresh
     }
 
     /// Its debt has reached what ends its slice.
@@ -148,7 +183,7 @@ impl Entry {
     }
 }
 
-/// What [`Scheduler::view`] sees.
+/// What [`Scheduler::view`] sees of one CPU.
 #[derive(Clone, Copy, Debug, Default)]
 struct View {
     /// The first runnable interactive process in queue order: its slot and order.
@@ -157,8 +192,6 @@ struct View {
     first_bound: Option<(usize, u64)>,
     runnable: usize,
     cpu_bound: usize,
-    /// A runnable interactive process has a slice of debt.
-    spent: bool,
 }
 
 /// The scheduling state of the guest's processes.
@@ -168,6 +201,8 @@ pub struct Scheduler {
     /// The entries at or past this index have never been used: the passes over the table
     /// stop here (a guest with two processes looks at two).
     reached: usize,
+    /// The guest's CPUs (bit n: CPU n).
+    cpus: u64,
     /// The next `order`: every join of a queue's tail takes one.
     next_order: u64,
     /// When the guest last looked ([`Scheduler::decide`]).
@@ -176,38 +211,58 @@ pub struct Scheduler {
     sender: Option<u32>,
     /// Since then another partition rang (frames came): the time is nobody's here.
     outside: bool,
-    /// The process the model said holds the CPU when the guest last looked.
-    head: Option<u32>,
-    /// The CPU-bound process whose turn it is (as of the last full decision).
-    turn: Option<u32>,
+    /// The process the model said holds each CPU when the guest last looked.
+    head: [Option<u32>; MAX_CPUS],
+    /// The CPU-bound process whose turn it is on each CPU (as of the last full decision).
+    turn: [Option<u32>; MAX_CPUS],
     /// Something happened that the last decision did not see.
     dirty: bool,
     /// When the next decision is due (the last decision's answer).
     due: Option<u64>,
     /// Counts the decisions that may have changed a level.
     generation: u64,
-    /// More than one interactive process was runnable at the last decision: an answer
-    /// to one may change which of them runs.
-    contended: bool,
+    /// More than one interactive process was runnable on the CPU at the last decision: an
+    /// answer to one may change which of them runs.
+    contended: [bool; MAX_CPUS],
 }
 
 impl Scheduler {
-    /// No processes yet; the clock reads `now`.
+    /// No processes yet, one CPU (CPU 0); the clock reads `now`.
     pub fn new(now: u64) -> Self {
+        Self::with_cpus(now, 1)
+    }
+
+    /// No processes yet on the guest's CPUs `cpus` (bit n: CPU n; none: CPU 0); the clock
+    /// reads `now`.
+    pub fn with_cpus(now: u64, cpus: u64) -> Self {
+        let cpus = cpus & ((1 << MAX_CPUS) - 1);
         Self {
             entries: [None; MAX_PROCESSES],
             reached: 0,
+            cpus: if cpus == 0 { 1 } else { cpus },
             next_order: 0,
             last: now,
             sender: None,
             outside: false,
-            head: None,
-            turn: None,
+            head: [None; MAX_CPUS],
+            turn: [None; MAX_CPUS],
             dirty: true,
             due: None,
             generation: 0,
-            contended: false,
+            contended: [false; MAX_CPUS],
         }
+    }
+
+    /// The CPU a thread not placed elsewhere runs on: the guest's lowest, where its own
+    /// thread and so every thread it creates start.
+    fn first_cpu(&self) -> u8 {
+        self.cpus.trailing_zeros() as u8
+    }
+
+    /// The guest's CPUs, ascending.
+    fn cpu_list(&self) -> impl Iterator<Item = u8> + use<> {
+        let cpus = self.cpus;
+        (0..MAX_CPUS as u8).filter(move |&cpu| cpus >> cpu & 1 != 0)
     }
 
     fn index(&self, pid: u32) -> Option<usize> {
@@ -216,18 +271,19 @@ impl Scheduler {
             .position(|e| e.is_some_and(|e| e.pid == pid))
     }
 
+    /// The entry of `pid`, once it has joined (a fresh one has not).
     fn get(&self, pid: u32) -> Option<&Entry> {
         self.entries[..self.reached]
             .iter()
             .flatten()
-            .find(|e| e.pid == pid)
+            .find(|e| e.pid == pid && !e.fresh)
     }
 
     fn get_mut(&mut self, pid: u32) -> Option<&mut Entry> {
         self.entries[..self.reached]
             .iter_mut()
             .flatten()
-            .find(|e| e.pid == pid)
+            .find(|e| e.pid == pid && !e.fresh)
     }
 
     /// The next place at a queue's tail.
@@ -262,13 +318,14 @@ impl Scheduler {
     /// queue. One the guest had seen waiting was woken (see [`Scheduler::decide`]). A
     /// process not seen before (a new child's first message) is added, interactive.
     pub fn replied(&mut self, pid: u32) {
-        let (order, contended, now) = (self.tail(), self.contended, self.last);
+        let (order, now, contended) = (self.tail(), self.last, self.contended);
         let Some(e) = self.get_mut(pid) else {
             return self.insert(pid, order);
         };
         e.in_call = false;
         e.answered = now;
         e.woken |= e.waiting_since.is_some() && !e.stopped;
+        let contended = contended[e.cpu as usize];
         let changed = e.woken || (!e.cpu_bound && contended);
         if !e.cpu_bound {
             e.order = order;
@@ -286,6 +343,41 @@ impl Scheduler {
         } else if !e.in_call {
             e.order = order; // resumed: the tail of its queue
             e.woken = e.waiting_since.is_some();
+        }
+        self.dirty = true;
+    }
+
+    /// Process `pid`'s thread runs on `cpu` from now on (one of the guest's; another is the
+    /// guest's first): placed when it was created, or moved while it waited. A CPU-bound
+    /// one leaves the turn order of its old CPU for the back of its new one's. A thread not
+    /// seen yet keeps its CPU until it joins at its first answer.
+    pub fn set_cpu(&mut self, pid: u32, cpu: u32) {
+        let cpu = if cpu < MAX_CPUS as u32 && self.cpus >> cpu & 1 != 0 {
+            cpu as u8
+        } else {
+            self.first_cpu()
+        };
+        let order = self.tail();
+        let Some(i) = self.index(pid) else {
+            self.insert(pid, order);
+            if let Some(e) = self.index(pid).and_then(|i| self.entries[i].as_mut()) {
+                (e.cpu, e.fresh) = (cpu, true);
+            }
+            return;
+        };
+        let Some(e) = self.entries[i].as_mut() else {
+            return;
+        };
+        let old = e.cpu as usize;
+        if e.cpu == cpu {
+            return;
+        }
+        e.cpu = cpu;
+        if e.cpu_bound {
+            e.order = order;
+        }
+        if self.turn[old] == Some(pid) {
+            self.turn[old] = None;
         }
         self.dirty = true;
     }
@@ -311,18 +403,28 @@ impl Scheduler {
         }
     }
 
-    /// Adds `pid`: interactive, runnable, no debt, at the tail of the interactive queue.
+    /// Adds `pid`: interactive, runnable, no debt, at the tail of the interactive queue,
+    /// on the CPU it was placed on (a fresh entry's), else the guest's first.
     fn insert(&mut self, pid: u32, order: u64) {
         let now = self.last;
+        let placed = self.index(pid);
+        let cpu = placed
+            .and_then(|i| self.entries[i])
+            .map_or(self.first_cpu(), |e| e.cpu);
         let free = self.entries[..self.reached]
             .iter()
             .position(Option::is_none);
-        let Some(i) = free.or((self.reached < MAX_PROCESSES).then_some(self.reached)) else {
+        let Some(i) = placed
+            .or(free)
+            .or((self.reached < MAX_PROCESSES).then_some(self.reached))
+        else {
             return;
         };
         self.reached = self.reached.max(i + 1);
         self.entries[i] = Some(Entry {
             pid,
+            cpu,
+            fresh: false,
             cpu_bound: false,
             in_call: false,
             stopped: false,
@@ -342,16 +444,18 @@ impl Scheduler {
             self.entries[i] = None;
             self.dirty = true;
         }
-        if self.turn == Some(pid) {
-            self.turn = None;
+        for turn in &mut self.turn {
+            if *turn == Some(pid) {
+                *turn = None;
+            }
         }
     }
 
-    /// The runnable processes at a glance (one pass over the table).
-    fn view(&self) -> View {
+    /// The runnable processes on `cpu` at a glance (one pass over the table).
+    fn view(&self, cpu: u8) -> View {
         let mut v = View::default();
         for (i, e) in self.entries[..self.reached].iter().enumerate() {
-            let Some(e) = e.filter(Entry::runnable) else {
+            let Some(e) = e.filter(|e| e.runnable() && e.cpu == cpu) else {
                 continue;
             };
             v.runnable += 1;
@@ -359,7 +463,6 @@ impl Scheduler {
                 v.cpu_bound += 1;
                 &mut v.first_bound
             } else {
-                v.spent |= e.spent();
                 &mut v.first_interactive
             };
             if first.is_none_or(|(_, order)| e.order < order) {
@@ -369,12 +472,25 @@ impl Scheduler {
         v
     }
 
-    /// The process the model says holds the CPU: the first runnable interactive one in
-    /// the kernel's queue order, else the one whose turn it is.
+    /// The process the model says holds the guest's first CPU ([`Scheduler::running_on`]).
     pub fn running(&self) -> Option<u32> {
-        let v = self.view();
+        self.running_on(self.first_cpu() as u32)
+    }
+
+    /// The process the model says holds `cpu`: its first runnable interactive one in the
+    /// kernel's queue order, else the one whose turn it is.
+    pub fn running_on(&self, cpu: u32) -> Option<u32> {
+        let v = self.view(u8::try_from(cpu).ok()?);
         let (i, _) = v.first_interactive.or(v.first_bound)?;
         self.entries[i].map(|e| e.pid)
+    }
+
+    /// The CPU `pid`'s thread runs on, as [`Scheduler::set_cpu`] last said (a thread not
+    /// placed: the guest's first).
+    pub fn cpu(&self, pid: u32) -> u32 {
+        self.index(pid)
+            .and_then(|i| self.entries[i])
+            .map_or(self.first_cpu(), |e| e.cpu) as u32
     }
 
     /// Counts the decisions that may have changed a [`Scheduler::level`]: the priorities
@@ -383,36 +499,53 @@ impl Scheduler {
         self.generation
     }
 
-    /// The guest looks at `now`: the time since it last looked is charged to the process
-    /// whose message arrived, or without one (a time-out, console input) to the one the
-    /// model said would run; that sender, if still unanswered, waits from now. The
-    /// processes answered after a wait are woken now: interactive, with their debt (a
-    /// CPU-bound one's: a slice) less the time they waited. Then the decisions due are
-    /// made: interactive processes whose debt reached a slice become CPU-bound (at the
-    /// back of the turn order), the turn passes on after a slice, starving CPU-bound
+    /// Charges `ns` that ended `now` to `pid`: it held its CPU. One that is unanswered
+    /// waits from now.
+    fn charge(&mut self, pid: u32, ns: u64, now: u64) {
+        let Some(e) = self.get_mut(pid) else {
+            return;
+        };
+        e.used = e.used.saturating_add(ns);
+        if !e.cpu_bound {
+            e.used = e.used.min(SLICE_NS);
+        }
+        e.since = now;
+        let waits = e.in_call && e.waiting_since.is_none();
+        if waits {
+            e.waiting_since = Some(now);
+        }
+        let spent = e.spent();
+        self.dirty |= waits || spent;
+    }
+
+    /// The guest looks at `now`: the time since it last looked is charged, on the CPU of
+    /// the process whose message arrived, to that sender, and on every other CPU (or
+    /// without a message: a time-out, console input) to the one the model said would run
+    /// there; the sender, if still unanswered, waits from now. The processes answered
+    /// after a wait are woken now: interactive, with their debt (a CPU-bound one's: a
+    /// slice) less the time they waited. Then the decisions due are made, CPU by CPU:
+    /// interactive processes whose debt reached a slice become CPU-bound (at the back of
+    /// their CPU's turn order), the turn passes on after a slice, starving CPU-bound
     /// processes become interactive. Returns when the next decision is due (the slice of
-    /// the process that runs ends while another may run, or a CPU-bound process starts to
-    /// starve), if any: the guest looks again then even if nothing else happens.
+    /// the process that runs on a CPU ends while another may run there, or a CPU-bound
+    /// process starts to starve), if any: the guest looks again then even if nothing else
+    /// happens.
     pub fn decide(&mut self, now: u64) -> Option<u64> {
         let ns = now.saturating_sub(self.last);
         self.last = now;
         let outside = core::mem::take(&mut self.outside);
         let spins = |e: &Entry| now.saturating_sub(e.answered) >= STARVATION_NS;
-        let head = self
-            .head
-            .filter(|&pid| !outside || self.get(pid).is_some_and(spins));
-        let charged = self.sender.take().or(head);
-        if let Some(e) = charged.and_then(|pid| self.get_mut(pid)) {
-            e.used = e.used.saturating_add(ns);
-            if !e.cpu_bound {
-                e.used = e.used.min(SLICE_NS);
+        let sender = self.sender.take();
+        let sender_cpu = sender.map(|pid| self.get(pid).map_or(self.first_cpu(), |e| e.cpu));
+        for cpu in self.cpu_list() {
+            let charged = match sender {
+                Some(pid) if sender_cpu == Some(cpu) => Some(pid),
+                _ => self.head[cpu as usize]
+                    .filter(|&pid| !outside || self.get(pid).is_some_and(spins)),
+            };
+            if let Some(pid) = charged {
+                self.charge(pid, ns, now);
             }
-            e.since = now;
-            let waits = e.in_call && e.waiting_since.is_none();
-            if waits {
-                e.waiting_since = Some(now);
-            }
-            self.dirty |= waits || e.spent();
         }
         if !self.dirty && self.due.is_none_or(|at| now < at) {
             return self.due;
@@ -430,20 +563,30 @@ impl Scheduler {
 
     /// The decisions of [`Scheduler::decide`], remade from the table.
     fn remake(&mut self, now: u64) -> Option<u64> {
-        let starves = |e: &Entry| now.saturating_sub(e.since) >= STARVATION_NS;
-        let mut v = self.view();
-        if v.spent {
-            for i in 0..self.reached {
-                if self.entries[i].is_some_and(|e| e.runnable() && !e.cpu_bound && e.spent()) {
-                    let order = self.tail();
-                    if let Some(e) = self.entries[i].as_mut() {
-                        (e.cpu_bound, e.used, e.order) = (true, 0, order);
-                    }
+        for i in 0..self.reached {
+            if self.entries[i].is_some_and(|e| e.runnable() && !e.cpu_bound && e.spent()) {
+                let order = self.tail();
+                if let Some(e) = self.entries[i].as_mut() {
+                    (e.cpu_bound, e.used, e.order) = (true, 0, order);
                 }
             }
-            v = self.view();
         }
-        self.pass_turn(&v);
+        let mut due: Option<u64> = None;
+        for cpu in self.cpu_list() {
+            if let Some(at) = self.remake_cpu(cpu, now) {
+                due = Some(due.map_or(at, |d| d.min(at)));
+            }
+        }
+        due
+    }
+
+    /// The decisions of one CPU: its turn, its aging, who holds it; when its next
+    /// decision is due.
+    fn remake_cpu(&mut self, cpu: u8, now: u64) -> Option<u64> {
+        let c = cpu as usize;
+        let starves = |e: &Entry| now.saturating_sub(e.since) >= STARVATION_NS;
+        let mut v = self.view(cpu);
+        self.pass_turn(cpu, &v);
         // The holder's slice is over: the next in turn order, if any, has the turn.
         if let Some((i, _)) = v.first_bound
             && self.entries[i].is_some_and(|e| e.spent())
@@ -455,14 +598,16 @@ impl Scheduler {
                     e.order = order;
                 }
             }
-            v = self.view();
-            self.pass_turn(&v);
+            v = self.view(cpu);
+            self.pass_turn(cpu, &v);
         }
         // The CPU-bound processes that starve: a slice at the top, each.
         if v.first_interactive.is_some() {
             let mut aged = false;
             for i in 0..self.reached {
-                if self.entries[i].is_some_and(|e| e.cpu_bound && e.runnable() && starves(&e)) {
+                if self.entries[i]
+                    .is_some_and(|e| e.cpu == cpu && e.cpu_bound && e.runnable() && starves(&e))
+                {
                     let order = self.tail();
                     if let Some(e) = self.entries[i].as_mut() {
                         (e.cpu_bound, e.used, e.order, e.since) = (false, 0, order, now);
@@ -471,13 +616,13 @@ impl Scheduler {
                 }
             }
             if aged {
-                v = self.view();
-                self.pass_turn(&v);
+                v = self.view(cpu);
+                self.pass_turn(cpu, &v);
             }
         }
 
-        self.contended = v.runnable - v.cpu_bound > 1;
-        self.head = v
+        self.contended[c] = v.runnable - v.cpu_bound > 1;
+        self.head[c] = v
             .first_interactive
             .or(v.first_bound)
             .and_then(|(i, _)| self.entries[i])
@@ -494,7 +639,7 @@ impl Scheduler {
             self.entries[..self.reached]
                 .iter()
                 .flatten()
-                .filter(|e| e.cpu_bound && e.runnable())
+                .filter(|e| e.cpu == cpu && e.cpu_bound && e.runnable())
                 .map(|e| e.since + STARVATION_NS)
                 .min()
         });
@@ -504,16 +649,16 @@ impl Scheduler {
         }
     }
 
-    /// Gives the turn to the first runnable CPU-bound process in turn order (`v`), if it
-    /// is not the holder already (its slice starts now; how long it has not run, which
+    /// Gives `cpu`'s turn to its first runnable CPU-bound process in turn order (`v`), if
+    /// it is not the holder already (its slice starts now; how long it has not run, which
     /// ages it, goes on).
-    fn pass_turn(&mut self, v: &View) {
+    fn pass_turn(&mut self, cpu: u8, v: &View) {
         let next = v
             .first_bound
             .and_then(|(i, _)| self.entries[i])
             .map(|e| e.pid);
-        if next != self.turn {
-            self.turn = next;
+        if next != self.turn[cpu as usize] {
+            self.turn[cpu as usize] = next;
             if let Some((i, _)) = v.first_bound
                 && let Some(e) = self.entries[i].as_mut()
             {
@@ -525,7 +670,7 @@ impl Scheduler {
     /// The level `pid`'s thread belongs at (a process not seen yet: interactive).
     pub fn level(&self, pid: u32) -> Level {
         match self.get(pid) {
-            Some(e) if e.cpu_bound && self.turn == Some(pid) => Level::Turn,
+            Some(e) if e.cpu_bound && self.turn[e.cpu as usize] == Some(pid) => Level::Turn,
             Some(e) if e.cpu_bound => Level::Queued,
             _ => Level::Interactive,
         }
@@ -1108,5 +1253,122 @@ mod tests {
         }
         let pipe = sim.procs[0].cpu + sim.procs[1].cpu;
         assert!(pipe > 2_000 * MS, "the pipe ran {pipe} ns");
+    }
+
+    #[test]
+    fn placement_takes_the_least_loaded_allowed_cpu_and_prefers_its_own_among_equals() {
+        let mut load: Load = [0; MAX_CPUS];
+        assert_eq!(place(0b110, 1, &load), 1, "equals: the preferred CPU");
+        assert_eq!(
+            place(0b110, 5, &load),
+            1,
+            "equals, preferred not allowed: the lowest"
+        );
+        assert_eq!(place(0b010, 2, &load), 1, "only one allowed");
+        assert_eq!(place(0, 3, &load), 3, "nothing allowed: where it is");
+        load[1] = 1;
+        assert_eq!(place(0b110, 1, &load), 2, "fewer runnable on CPU 2");
+        load[2] = 1;
+        assert_eq!(place(0b110, 2, &load), 2);
+        assert_eq!(place(0b1010, 3, &load), 3, "CPU 3 is idle");
+        // `xargs -P2 gzip` on CPUs 1 and 2: xargs (not counted) forks the first gzip onto
+        // its own CPU, the second onto the other, and waits.
+        let mut load: Load = [0; MAX_CPUS];
+        let first = place(0b110, 1, &load);
+        load[first as usize] += 1;
+        let second = place(0b110, 1, &load);
+        assert_eq!((first, second), (1, 2));
+        // Bits beyond the kernel's eight CPUs are no CPU.
+        assert_eq!(place(1 << 40 | 0b100, 2, &[0; MAX_CPUS]), 2);
+    }
+
+    #[test]
+    fn each_cpu_has_its_own_turn() {
+        // Two spinners on CPUs 1 and 2 of a guest with both: each is alone among the
+        // CPU-bound processes of its CPU, so each keeps its turn; a third on CPU 1 takes
+        // turns with the first only.
+        let mut s = Scheduler::with_cpus(0, 0b110);
+        for (pid, cpu) in [(1, 1), (2, 2), (3, 1)] {
+            s.set_cpu(pid, cpu);
+            assert_eq!(s.cpu(pid), cpu);
+            assert_eq!(s.level(pid), Level::Interactive, "placed, not yet answered");
+        }
+        s.replied(1);
+        s.replied(2);
+        s.decide(0);
+        assert_eq!((s.running_on(1), s.running_on(2)), (Some(1), Some(2)));
+        assert_eq!(s.running(), Some(1), "the guest's first CPU");
+        s.decide(SLICE_NS);
+        assert_eq!(
+            (s.level(1), s.level(2)),
+            (Level::Turn, Level::Turn),
+            "both ran a slice at once, each on its CPU"
+        );
+        for k in 2..20 {
+            s.decide(k * SLICE_NS);
+            assert_eq!((s.level(1), s.level(2)), (Level::Turn, Level::Turn), "{k}");
+        }
+        s.replied(3);
+        let t = 20 * SLICE_NS;
+        s.decide(t);
+        assert_eq!(s.running_on(1), Some(3), "new: interactive, above the turn");
+        s.decide(t + SLICE_NS);
+        assert_eq!(
+            (s.level(1), s.level(3), s.level(2)),
+            (Level::Turn, Level::Queued, Level::Turn)
+        );
+        s.decide(t + 2 * SLICE_NS);
+        assert_eq!(
+            (s.level(1), s.level(3), s.level(2)),
+            (Level::Queued, Level::Turn, Level::Turn),
+            "CPU 1's turn passed; CPU 2's did not"
+        );
+        // Moved (while it waited) to CPU 2, the holder leaves CPU 1's turn to the other
+        // and queues behind CPU 2's holder.
+        s.received(3);
+        s.set_cpu(3, 2);
+        s.replied(3);
+        s.decide(t + 2 * SLICE_NS + MS);
+        assert_eq!(
+            (s.level(1), s.level(2), s.level(3)),
+            (Level::Turn, Level::Turn, Level::Queued)
+        );
+        assert_eq!(s.cpu(3), 2);
+        // A CPU not the guest's places nowhere but the first.
+        s.set_cpu(9, 5);
+        assert_eq!(s.cpu(9), 1);
+    }
+
+    #[test]
+    fn a_spinner_is_charged_while_another_cpu_sends_messages() {
+        // Process 1 spins on CPU 1; process 2 on CPU 2 makes a call every millisecond.
+        // On one CPU the caller's messages would mean process 1 did not run; here it ran
+        // all the time, and becomes CPU-bound after a slice.
+        let mut s = Scheduler::with_cpus(0, 0b110);
+        s.set_cpu(1, 1);
+        s.set_cpu(2, 2);
+        s.replied(1);
+        s.replied(2);
+        s.decide(0);
+        for k in 1..=10 {
+            call(&mut s, 2);
+            s.decide(k * MS);
+        }
+        assert_eq!(
+            s.level(1),
+            Level::Turn,
+            "CPU-bound after a slice on its CPU"
+        );
+        assert_eq!(s.level(2), Level::Turn, "the caller ran its slice on CPU 2");
+        // With one CPU, the same messages leave the spinner uncharged.
+        let mut s = Scheduler::new(0);
+        s.replied(1);
+        s.replied(2);
+        s.decide(0);
+        for k in 1..=10 {
+            call(&mut s, 2);
+            s.decide(k * MS);
+        }
+        assert_eq!(s.level(1), Level::Interactive);
     }
 }

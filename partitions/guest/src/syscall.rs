@@ -22,7 +22,8 @@
 //! `getrandom`, `clock_gettime`, `gettimeofday`, `time`, `uname`, `umask`, `sched_yield`,
 //! `prctl` (`PR_SET_NAME`, `PR_GET_NAME`; other options `EINVAL`, logged once),
 //! the identity and resource calls of [`crate::info`] (the uid/gid calls, `getrusage`,
-//! `times`, `sched_getaffinity`, `sched_setaffinity`, `getpriority`, `setpriority`), `sysinfo` (the process table's), the identity calls (`getpid`, `getppid`, `gettid`, `getpgrp`, `getuid`, `geteuid`,
+//! `times`, `getpriority`, `setpriority`), `getcpu`, `sched_getaffinity`, `sysinfo` and
+//! `sched_setaffinity` (the process table's: [`crate::system`]), the identity calls (`getpid`, `getppid`, `gettid`, `getpgrp`, `getuid`, `geteuid`,
 //! `getgid`, `getegid`), `exit`, `exit_group`; `clone`, `fork`, `vfork`, `execve`,
 //! `wait4`, `waitid`, `kill`, `tkill`, `tgkill`, `futex`, `setpgid`, `getpgid`, `setsid` and
 //! `getsid` are the process table's ([`crate::system`]). On the console, `read`
@@ -156,6 +157,11 @@ pub trait Host {
     /// A call waits for a port (to read or to write, or in `poll`): its messages arrive
     /// without a word to the guest, so the host serves the waiting calls again soon.
     fn port_wait(&mut self) {}
+    /// The guest's CPUs (bit n: CPU n): those its partition's threads may run on. A host
+    /// that does not say has CPU 0 alone.
+    fn cpus(&mut self) -> u64 {
+        1
+    }
     /// What port `port` could do now.
     fn port_readiness(&mut self, port: usize) -> arinc::Readiness {
         let _ = port;
@@ -243,6 +249,13 @@ pub enum ProcessCall {
     /// `sysinfo`, writing its record at `record`.
     Sysinfo {
         record: u64,
+    },
+    /// `sched_setaffinity` of thread `pid` (0: the caller): the mask of `len` bytes at
+    /// `mask`.
+    SetAffinity {
+        pid: u64,
+        len: u64,
+        mask: u64,
     },
 }
 

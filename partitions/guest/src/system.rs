@@ -28,6 +28,10 @@
 //!
 //! **Threads** of a process are slots of their own ([`threads`]).
 //!
+//! **CPUs.** Each thread runs on one of the guest's CPUs: placed when it is created, moved
+//! when its affinity no longer allows it and perhaps when it wakes ([`cpus`]: the rule and
+//! why).
+//!
 //! **Limits.** At most [`MAX_PROCESSES`] processes and threads, zombies included, and at most as many
 //! as the partition's task quota (`kernel_tasks` minus the guest's own task) and thread quota
 //! (`kernel_threads`) let it create: beyond either, `fork` and `clone` fail with `EAGAIN`. The
@@ -49,7 +53,10 @@ use crate::vfs::proc::{ProcInfo, ProcessTable};
 use abi::ipc::{ExceptionMessage, Registers};
 use alloc::vec::Vec;
 
+mod cpus;
 mod threads;
+
+pub use cpus::CPUMASK_SIZE;
 
 /// Most processes and threads of a guest (the configuration's quotas may allow fewer).
 pub const MAX_PROCESSES: usize = 64;
@@ -95,15 +102,22 @@ pub trait Tasks: Host {
     /// starts at address 0 with this guest as its exception handler. Returns how many pages
     /// it shares; `EAGAIN` when no task or thread can be created, `ENOMEM` when the guest
     /// is out of memory for its bookkeeping (then nothing of the child is left).
-    fn fork(&mut self, child: u32, areas: &Areas) -> Result<u64, Errno>;
+    /// Its thread runs on CPU `cpu` (one of [`Host::cpus`]) from its start.
+    fn fork(&mut self, child: u32, areas: &Areas, cpu: u32) -> Result<u64, Errno>;
     /// Creates process `child` of a `vfork`: a thread in the selected process's task
     /// (`parent`'s), starting at address 0 like a forked child's, so the child runs in its
-    /// parent's memory until it executes or ends, as Linux's vfork child does.
-    fn borrow(&mut self, child: u32, parent: u32) -> Result<(), Errno>;
+    /// parent's memory until it executes or ends, as Linux's vfork child does; also a
+    /// thread of `clone(CLONE_THREAD)`. It runs on CPU `cpu` from its start.
+    fn borrow(&mut self, child: u32, parent: u32, cpu: u32) -> Result<(), Errno>;
     /// Gives process `pid`, if it runs in its parent's memory (a vfork child), a task and
-    /// memory of its own and a new thread that starts at address 0 (its old thread is
-    /// gone): `Ok(true)`; `Ok(false)` for a process that has them already.
-    fn own(&mut self, pid: u32) -> Result<bool, Errno>;
+    /// memory of its own and a new thread that starts at address 0 on CPU `cpu` (its old
+    /// thread is gone): `Ok(true)`; `Ok(false)` for a process that has them already.
+    fn own(&mut self, pid: u32, cpu: u32) -> Result<bool, Errno>;
+    /// Moves `pid`'s thread to CPU `cpu` (one of [`Host::cpus`]). Asked while the thread
+    /// waits for the guest (its message is being served, or its call waits); for a
+    /// thread that may be running on another CPU (`sched_setaffinity` of another thread)
+    /// the host moves it at its next message.
+    fn set_cpu(&mut self, pid: u32, cpu: u32);
     /// Ends process `pid`: its task (a vfork child's thread), its memory and its pending
     /// console output.
     fn release(&mut self, pid: u32);
@@ -163,6 +177,9 @@ struct Slot {
     stopped: bool,
     /// A stop (`0x7f | signal << 8`) or continue (`0xffff`) its parent has not waited for.
     report: Option<u32>,
+    /// Its call waited (blocked, or a vfork parent): when it is answered, its thread is
+    /// woken and may move to a CPU with fewer threads ([`System::rebalance`]).
+    waited: bool,
 }
 
 /// Which children a wait is for.
@@ -276,6 +293,7 @@ impl System {
             state: State::Running,
             stopped: false,
             report: None,
+            waited: false,
         })];
         Self {
             slots,
@@ -536,6 +554,7 @@ impl System {
         mut m: ExceptionMessage,
         trap: Option<(u64, u64, u64)>,
     ) -> Option<Outcome> {
+        self.rebalance(i, k);
         loop {
             let slot = self.slots[i].as_mut()?;
             let p = &mut slot.process;
@@ -902,6 +921,7 @@ impl System {
             Outcome::Resume => self.resume(i, fs, k, m, None),
             Outcome::Block => {
                 slot.state = State::Blocked(kept);
+                slot.waited = true;
                 None
             }
             Outcome::Exit(code) => self.end(i, exit_status(code), fs, k),
@@ -941,6 +961,9 @@ impl System {
                     ProcessCall::GroupOf { pid, session } => self.group_of(i, pid, session),
                     ProcessCall::SetSid => self.setsid(i),
                     ProcessCall::Sysinfo { record } => self.sysinfo(i, k, record),
+                    ProcessCall::SetAffinity { pid, len, mask } => {
+                        self.set_affinity(i, k, pid, len, mask)
+                    }
                     ProcessCall::Wait4 {
                         pid,
                         status,
@@ -1008,6 +1031,7 @@ impl System {
                                 child: child as u32,
                                 reply: m,
                             };
+                            slot.waited = true;
                         }
                         None
                     }
@@ -1023,6 +1047,7 @@ impl System {
     fn block(&mut self, i: usize, m: ExceptionMessage) -> Option<Outcome> {
         if let Some(slot) = self.slots[i].as_mut() {
             slot.state = State::Blocked(m);
+            slot.waited = true;
         }
         None
     }
@@ -1095,8 +1120,10 @@ impl System {
         while self.index(pid).is_some() || pid == 0 {
             pid = next_pid(pid);
         }
+        let cpu = self.place_new(i, k);
         let parent = &self.slots[i].as_ref().ok_or(Errno::ESRCH)?.process;
         let mut child = parent.clone();
+        child.cpu = cpu;
         child.pid = pid;
         child.tgid = pid;
         child.ppid = parent.tgid;
@@ -1118,10 +1145,10 @@ impl System {
         };
         let started = k.now_ns();
         let pages = if flags & CLONE_VM != 0 {
-            k.borrow(pid, parent.pid)?;
+            k.borrow(pid, parent.pid, cpu)?;
             0
         } else {
-            k.fork(pid, &parent.areas)?
+            k.fork(pid, &parent.areas, cpu)?
         };
         let took = k.now_ns().saturating_sub(started);
         share_files(&child, &mut self.pipes, &mut self.events, &mut self.net, fs);
@@ -1151,6 +1178,7 @@ impl System {
             state: State::Starting(child_registers),
             stopped: false,
             report: None,
+            waited: false,
         });
         self.next_pid = next_pid(pid);
         Ok(pid as u64)
@@ -1272,7 +1300,7 @@ impl System {
         let mut script = [&b""[..]; MAX_STRINGS + 2];
         let mut file = path[0];
         let mut argv: &[&[u8]] = args;
-        let (pid, cwd) = (p.pid, p.cwd);
+        let (pid, cwd, cpu) = (p.pid, p.cwd, p.cpu);
         let data = exec::find(fs, pid, cwd, file).map_err(exec_errno)?.bytes;
         // The `#!` line, copied: the file may go before the interpreter loads (as a
         // close-on-exec descriptor closes).
@@ -1323,7 +1351,7 @@ impl System {
         let slot = self.slots[i].as_mut().ok_or(Errno::ESRCH)?;
         // A vfork child gets memory of its own first (the old image is its parent's).
         k.select(pid);
-        let borrowed = k.own(pid)?;
+        let borrowed = k.own(pid, cpu)?;
         // No return from here: the old image goes.
         let old = &mut slot.process;
         if !borrowed {
@@ -1350,6 +1378,7 @@ impl System {
                 new.pending_info = old.pending_info;
                 new.umask = old.umask;
                 new.limits = old.limits;
+                (new.cpu, new.affinity) = (old.cpu, old.affinity);
                 (new.pgid, new.sid, new.executed) = (old.pgid, old.sid, true);
                 (new.alarm_at, new.alarm_interval) = (old.alarm_at, old.alarm_interval);
                 // Handlers are gone with the image; ignored signals stay ignored.

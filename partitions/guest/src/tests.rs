@@ -52,6 +52,12 @@ struct Model {
     port_waits: usize,
     /// The kernel's answers asked for ([`Host::answer_always`]): thread, number, result.
     answers: Vec<(u32, u64, u32)>,
+    /// The guest's CPUs ([`Host::cpus`]; 0: CPU 0 alone).
+    cpus: u64,
+    /// The CPU each thread was created on or moved to last ([`Tasks::fork`],
+    /// [`Tasks::set_cpu`]), and the moves of threads that existed.
+    cpu_of: HashMap<u32, u32>,
+    moves: Vec<(u32, u32)>,
 }
 
 /// A disk in memory that counts its flushes; clones share it (the test keeps one while
@@ -306,6 +312,9 @@ impl Host for Model {
     }
     fn random(&mut self, buf: &mut [u8]) {
         buf.fill(0x5a);
+    }
+    fn cpus(&mut self) -> u64 {
+        if self.cpus == 0 { 1 } else { self.cpus }
     }
     fn log(&mut self, line: core::fmt::Arguments) {
         self.log.push(line.to_string());
@@ -1379,8 +1388,23 @@ fn dispatch_table() {
         assert!(!logged_unsupported, "{} ({number})", entry.name);
         let process_table = matches!(outcome, Outcome::Process(_));
         let handler_is_process_tables = [
-            "exit", "clone", "fork", "vfork", "execve", "wait4", "waitid", "kill", "tkill",
-            "tgkill", "setpgid", "getpgid", "setsid", "getsid", "sysinfo", "futex",
+            "exit",
+            "clone",
+            "fork",
+            "vfork",
+            "execve",
+            "wait4",
+            "waitid",
+            "kill",
+            "tkill",
+            "tgkill",
+            "setpgid",
+            "getpgid",
+            "setsid",
+            "getsid",
+            "sysinfo",
+            "futex",
+            "sched_setaffinity",
         ]
         .contains(&entry.handler_name);
         // The process table's calls reach it (kill and exit whatever their arguments;
@@ -1571,19 +1595,26 @@ impl Tasks for Model {
             self.current = pid;
         }
     }
-    fn borrow(&mut self, child: u32, parent: u32) -> Result<(), Errno> {
+    fn borrow(&mut self, child: u32, parent: u32, cpu: u32) -> Result<(), Errno> {
         let owner = self.aliases.get(&parent).copied().unwrap_or(parent);
         self.aliases.insert(child, owner);
+        self.cpu_of.insert(child, cpu);
         Ok(())
     }
-    fn own(&mut self, pid: u32) -> Result<bool, Errno> {
+    fn own(&mut self, pid: u32, cpu: u32) -> Result<bool, Errno> {
         let borrowed = self.aliases.remove(&pid).is_some();
         if borrowed {
             self.select(pid);
+            self.cpu_of.insert(pid, cpu);
         }
         Ok(borrowed)
     }
-    fn fork(&mut self, child: u32, _: &crate::memory::Areas) -> Result<u64, Errno> {
+    fn set_cpu(&mut self, pid: u32, cpu: u32) {
+        self.moves.push((pid, cpu));
+        self.cpu_of.insert(pid, cpu);
+    }
+    fn fork(&mut self, child: u32, _: &crate::memory::Areas, cpu: u32) -> Result<u64, Errno> {
+        self.cpu_of.insert(child, cpu);
         let n = self.pages.len() as u64;
         if n > self.budget {
             return Err(Errno::ENOMEM);
@@ -1630,10 +1661,17 @@ const WNOHANG: u64 = 1;
 
 impl<'a> Guest<'a> {
     fn new(bytes: &'a [u8]) -> Self {
+        Self::with_cpus(bytes, 1)
+    }
+
+    /// A guest on CPUs `cpus` (bit n: CPU n), init on the lowest, as syssw starts it.
+    fn with_cpus(bytes: &'a [u8], cpus: u64) -> Self {
         let fs = Fs::new(&Archive::new(bytes).unwrap(), 1 << 20).unwrap();
         let mut host = Model::new(100_000);
         host.current = 1;
-        let loaded = exec::load(&fs, &mut host, 1, 0, &[b"/bin/sh"], &[], 0).unwrap();
+        host.cpus = cpus;
+        let mut loaded = exec::load(&fs, &mut host, 1, 0, &[b"/bin/sh"], &[], 0).unwrap();
+        loaded.process.cpu = cpus.trailing_zeros();
         let mut g = Guest {
             fs,
             system: System::new(loaded.process, 0),
@@ -3184,6 +3222,7 @@ fn proc_files_of_the_processes() {
             "mounts",
             "filesystems",
             "net",
+            "cpuinfo",
             "1",
             child_name.as_str()
         ]
@@ -4235,4 +4274,212 @@ fn threads_share_their_process_and_futexes_wake_them() {
         g.call(1, nr::clone, [0x10900, stack, 0, 0, 0, 0]),
         Some(err(Errno::EINVAL))
     );
+}
+
+/// A guest on CPUs 1 and 2: new processes go to the CPU with fewer runnable threads (the
+/// creator not counted; of equals, the creator's), `sched_setaffinity` moves them and is
+/// inherited, a woken thread moves to a less loaded CPU, and `getcpu`,
+/// `sched_getaffinity`, `/proc` and `/sys` say so.
+#[test]
+fn threads_are_placed_on_the_guests_cpus() {
+    let bytes = initramfs();
+    let mut g = Guest::with_cpus(&bytes, 0b110);
+    let mask =
+        |g: &mut Guest, pid: u32| u64::from_le_bytes(g.get(pid, SCRATCH, 8).try_into().unwrap());
+    let getcpu = |g: &mut Guest, pid: u32| {
+        g.put(pid, SCRATCH, &[0xff; 8]);
+        assert_eq!(
+            g.call(pid, nr::getcpu, [SCRATCH, SCRATCH + 4, 0, 0, 0, 0]),
+            Some(0)
+        );
+        let b = g.get(pid, SCRATCH, 8);
+        assert_eq!(b[4..], [0; 4], "node 0");
+        u32::from_le_bytes(b[..4].try_into().unwrap())
+    };
+    assert_eq!(getcpu(&mut g, 1), 1, "init: the guest's first CPU");
+    assert_eq!(g.call(1, nr::getcpu, [0; 6]), Some(0), "null pointers");
+    assert_eq!(
+        g.call(1, nr::sched_getaffinity, [0, 8, SCRATCH, 0, 0, 0]),
+        Some(8)
+    );
+    assert_eq!(mask(&mut g, 1), 0b110);
+    for len in [0, 4, 12] {
+        assert_eq!(
+            g.call(1, nr::sched_getaffinity, [0, len, SCRATCH, 0, 0, 0]),
+            Some(err(Errno::EINVAL)),
+            "{len}"
+        );
+    }
+    assert_eq!(
+        g.call(1, nr::sched_getaffinity, [999, 8, SCRATCH, 0, 0, 0]),
+        Some(err(Errno::ESRCH))
+    );
+    // `xargs -P2`: the first child on the parent's CPU, the second on the other one.
+    let a = g.fork(1);
+    let b = g.fork(1);
+    assert_eq!((g.host.cpu_of[&a], g.host.cpu_of[&b]), (1, 2));
+    assert_eq!((getcpu(&mut g, a), getcpu(&mut g, b)), (1, 2));
+    assert_eq!(
+        g.call(1, nr::sched_getaffinity, [b.into(), 8, SCRATCH, 0, 0, 0]),
+        Some(8),
+        "another process's"
+    );
+    assert_eq!(mask(&mut g, 1), 0b110);
+    // Its own affinity: CPU 1 only (a 4-byte mask); it moves there at once.
+    g.put(b, SCRATCH, &0b10u32.to_le_bytes());
+    assert_eq!(
+        g.call(b, nr::sched_setaffinity, [0, 4, SCRATCH, 0, 0, 0]),
+        Some(0)
+    );
+    assert_eq!(g.host.moves.last(), Some(&(b, 1)));
+    assert_eq!(getcpu(&mut g, b), 1);
+    assert_eq!(
+        g.call(b, nr::sched_getaffinity, [0, 16, SCRATCH, 0, 0, 0]),
+        Some(8)
+    );
+    assert_eq!(mask(&mut g, b), 0b10);
+    // A mask without any of the guest's CPUs, a thread that does not exist.
+    g.put(b, SCRATCH, &0b1001u64.to_le_bytes());
+    assert_eq!(
+        g.call(b, nr::sched_setaffinity, [0, 8, SCRATCH, 0, 0, 0]),
+        Some(err(Errno::EINVAL))
+    );
+    g.put(b, SCRATCH, &0b110u64.to_le_bytes());
+    assert_eq!(
+        g.call(b, nr::sched_setaffinity, [999, 8, SCRATCH, 0, 0, 0]),
+        Some(err(Errno::ESRCH))
+    );
+    // Inherited by fork: b's child may only run on CPU 1.
+    let c = g.fork(b);
+    assert_eq!(g.host.cpu_of[&c], 1);
+    assert_eq!(
+        g.call(c, nr::sched_getaffinity, [0, 8, SCRATCH, 0, 0, 0]),
+        Some(8)
+    );
+    assert_eq!(mask(&mut g, c), 0b10);
+    // /proc says where they are and may run.
+    let path = g.text(1, SCRATCH + 0x800, &format!("/proc/{b}/status"));
+    let fd = g.call(1, nr::open, [path, 0, 0, 0, 0, 0]).unwrap();
+    let n = g.call(1, nr::read, [fd, SCRATCH, 4096, 0, 0, 0]).unwrap();
+    let status = String::from_utf8(g.get(1, SCRATCH, n as usize)).unwrap();
+    assert!(
+        status.contains("Cpus_allowed:\t2\nCpus_allowed_list:\t1\n"),
+        "{status}"
+    );
+    assert_eq!(g.call(1, nr::close, [fd, 0, 0, 0, 0, 0]), Some(0));
+    let path = g.text(1, SCRATCH + 0x800, &format!("/proc/{a}/stat"));
+    let fd = g.call(1, nr::open, [path, 0, 0, 0, 0, 0]).unwrap();
+    let n = g.call(1, nr::read, [fd, SCRATCH, 4096, 0, 0, 0]).unwrap();
+    let stat = String::from_utf8(g.get(1, SCRATCH, n as usize)).unwrap();
+    assert_eq!(stat.split(' ').nth(38), Some("1"), "{stat}");
+    assert_eq!(g.call(1, nr::close, [fd, 0, 0, 0, 0, 0]), Some(0));
+    // Init moves a (on CPU 1) to CPU 2 by its pid; then all of b, c and init are on CPU 1,
+    // a alone on CPU 2.
+    g.put(1, SCRATCH, &0b100u64.to_le_bytes());
+    assert_eq!(
+        g.call(1, nr::sched_setaffinity, [a.into(), 8, SCRATCH, 0, 0, 0]),
+        Some(0)
+    );
+    assert_eq!(g.host.moves.last(), Some(&(a, 2)));
+    assert_eq!(getcpu(&mut g, a), 2);
+    g.put(b, SCRATCH, &0b110u64.to_le_bytes());
+    assert_eq!(
+        g.call(b, nr::sched_setaffinity, [0, 8, SCRATCH, 0, 0, 0]),
+        Some(0),
+        "CPU 1 still allowed: no move"
+    );
+    assert_eq!(g.host.moves.last(), Some(&(a, 2)));
+    // a ends; init waits for its children, c sleeps: b runs alone on CPU 1. When c
+    // wakes, CPU 2 has nobody: it moves there before its reply.
+    assert_eq!(g.serve(a, World::message(nr::exit_group, [0; 6], 0)), []);
+    let status = SCRATCH + 0x100;
+    let _ = g.call(1, nr::wait4, [a.into(), status, 0, 0, 0, 0]);
+    assert_eq!(
+        g.call(1, nr::wait4, [u64::MAX, status, 0, 0, 0, 0]),
+        None,
+        "waits"
+    );
+    g.put(c, SCRATCH, &0b110u64.to_le_bytes());
+    assert_eq!(
+        g.call(c, nr::sched_setaffinity, [0, 8, SCRATCH, 0, 0, 0]),
+        Some(0)
+    );
+    // 2 s: the model's clock advances 1.5 s per reading.
+    g.put(
+        c,
+        SCRATCH,
+        &[2, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0],
+    );
+    assert!(
+        g.serve(c, on_stack(nr::nanosleep, [SCRATCH, 0, 0, 0, 0, 0]))
+            .is_empty()
+    );
+    assert_eq!(g.system.tick(&mut g.fs, &mut g.host), None);
+    assert_eq!(
+        g.host.moves.last(),
+        Some(&(c, 2)),
+        "woken onto the idle CPU"
+    );
+    assert_eq!(getcpu(&mut g, c), 2);
+    // execve keeps the CPU and the affinity.
+    let path = g.text(c, SCRATCH + 0x800, "/bin/sh");
+    assert!(g.call(c, nr::execve, [path, 0, 0, 0, 0, 0]).is_some());
+    assert_eq!(
+        g.call(c, nr::mmap, [SCRATCH, PAGE, 3, 0x32, u64::MAX, 0]),
+        Some(SCRATCH),
+        "the new image's scratch page"
+    );
+    assert_eq!(getcpu(&mut g, c), 2);
+    assert_eq!(
+        g.call(c, nr::sched_getaffinity, [0, 8, SCRATCH, 0, 0, 0]),
+        Some(8)
+    );
+    assert_eq!(mask(&mut g, c), 0b110);
+
+    // The C libraries' and `nproc --all`'s view: sysfs's lists and a directory per CPU
+    // (asked by b: init waits).
+    g.fs.set_cpus(0b110).unwrap();
+    let path = g.text(b, SCRATCH + 0x800, "/sys/devices/system/cpu/online");
+    let fd = g.call(b, nr::open, [path, 0, 0, 0, 0, 0]).unwrap();
+    assert_eq!(g.call(b, nr::read, [fd, SCRATCH, 64, 0, 0, 0]), Some(4));
+    assert_eq!(g.get(b, SCRATCH, 4), b"1-2\n");
+    for dir in ["cpu1", "cpu2"] {
+        let path = g.text(
+            b,
+            SCRATCH + 0x800,
+            &format!("/sys/devices/system/cpu/{dir}"),
+        );
+        assert_eq!(
+            g.call(b, nr::access, [path, 0, 0, 0, 0, 0]),
+            Some(0),
+            "{dir}"
+        );
+    }
+}
+
+/// A one-CPU guest places nothing and moves nothing, wherever its CPU is.
+#[test]
+fn a_one_cpu_guest_keeps_every_thread_on_its_cpu() {
+    let bytes = initramfs();
+    let mut g = Guest::with_cpus(&bytes, 0b10);
+    let a = g.fork(1);
+    let b = g.fork(a);
+    assert_eq!((g.host.cpu_of[&a], g.host.cpu_of[&b]), (1, 1));
+    assert_eq!(
+        g.call(b, nr::sched_getaffinity, [0, 8, SCRATCH, 0, 0, 0]),
+        Some(8)
+    );
+    assert_eq!(g.get(b, SCRATCH, 8), 0b10u64.to_le_bytes());
+    g.put(b, SCRATCH, &1u64.to_le_bytes());
+    assert_eq!(
+        g.call(b, nr::sched_setaffinity, [0, 8, SCRATCH, 0, 0, 0]),
+        Some(err(Errno::EINVAL)),
+        "CPU 0 is not the guest's"
+    );
+    g.put(b, SCRATCH, &u64::MAX.to_le_bytes());
+    assert_eq!(
+        g.call(b, nr::sched_setaffinity, [0, 8, SCRATCH, 0, 0, 0]),
+        Some(0)
+    );
+    assert!(g.host.moves.is_empty());
 }

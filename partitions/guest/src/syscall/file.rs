@@ -60,6 +60,7 @@ fn procs<'s>(p: &'s Process, f: &'s Files) -> Procs<'s> {
         tid: p.pid,
         others: f.others,
         now_ns: 0,
+        cpus: 1,
         memory: f.fs.memory(),
         fs_used: f.fs.usage().0 as u64,
         interfaces: f.net.interfaces(),
@@ -1267,6 +1268,7 @@ pub fn openat(
             } else {
                 let mut procs = procs(p, f);
                 procs.now_ns = host.now_ns();
+                procs.cpus = host.cpus();
                 Some(proc::contents(n, &procs).ok_or(Errno::ENOENT)?)
             }
         }

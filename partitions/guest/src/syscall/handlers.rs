@@ -583,21 +583,40 @@ pub fn times<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     }
     Ok(c.host.now_ns() / (1_000_000_000 / info::TICKS_PER_S))
 }
-/// One CPU.
+/// `sched_getaffinity(pid, len, mask)`: the CPUs thread `pid` (0: the caller) may run
+/// on, of the guest's ([`Host::cpus`]), as Linux: `len` must be a whole number of words
+/// reaching its mask's size (`EINVAL`), `ESRCH` without such a thread; writes and returns
+/// that size.
 pub fn sched_getaffinity<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    match a.usize(1) {
-        len if len < 8 || len % 8 != 0 => Err(Errno::EINVAL),
-        _ => c.write_user(a.ptr(2), &1u64.to_le_bytes()).map(|()| 8),
+    const CPUMASK_SIZE: u64 = crate::system::CPUMASK_SIZE as u64;
+    let len = a.usize(1);
+    if len < CPUMASK_SIZE || !len.is_multiple_of(CPUMASK_SIZE) {
+        return Err(Errno::EINVAL);
     }
+    let affinity = match a.raw(0) as i32 {
+        0 => c.p.affinity,
+        tid if tid as u32 == c.p.pid => c.p.affinity,
+        tid if tid < 0 => return Err(Errno::ESRCH),
+        tid => c.f.others.find(tid as u32).ok_or(Errno::ESRCH)?.affinity,
+    };
+    let allowed = affinity & c.host.cpus();
+    c.write_user(a.ptr(2), &allowed.to_le_bytes())?;
+    Ok(CPUMASK_SIZE)
 }
+/// The process table's: the thread may be another than the caller ([`crate::system`]).
 pub fn sched_setaffinity<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    if a.usize(1) < 8 {
-        return Err(Errno::EINVAL);
+    let (pid, len, mask) = (a.raw(0), a.usize(1), a.ptr(2));
+    to_process_table(c, ProcessCall::SetAffinity { pid, len, mask })
+}
+/// `getcpu(cpu, node, cache)`: the caller's CPU ([`crate::system`] placed it) and node 0
+/// (the guest has one memory node); either pointer may be null.
+pub fn getcpu<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
+    if a.ptr(0) != 0 {
+        let cpu = c.p.cpu;
+        c.write_user(a.ptr(0), &cpu.to_le_bytes())?;
     }
-    let mut mask = [0u8; 8];
-    c.read_user(a.ptr(2), &mut mask)?;
-    if u64::from_le_bytes(mask) & 1 == 0 {
-        return Err(Errno::EINVAL);
+    if a.ptr(1) != 0 {
+        c.write_user(a.ptr(1), &0u32.to_le_bytes())?;
     }
     Ok(0)
 }

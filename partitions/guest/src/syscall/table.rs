@@ -304,7 +304,7 @@ table! {
     getrusage => getrusage,
     times => times,
     sched_getaffinity => sched_getaffinity,
-    sched_setaffinity => sched_setaffinity,
+    getcpu => getcpu,
     getpriority => getpriority,
     setpriority => setpriority,
     // Identity: one user (root).
@@ -343,6 +343,7 @@ table! {
     setsid => setsid,
     getsid => getsid,
     sysinfo => sysinfo,
+    sched_setaffinity => sched_setaffinity,
 }
 
 /// The calls that change nothing but their caller's own state (what it learns, its memory
@@ -365,6 +366,7 @@ pub const CALLER_ONLY: &[u64] = &[
     nr::getrusage,
     nr::times,
     nr::sched_getaffinity,
+    nr::getcpu,
     nr::getpriority,
     nr::uname,
     nr::clock_gettime,

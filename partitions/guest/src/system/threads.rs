@@ -133,12 +133,14 @@ impl System {
         while self.index(tid).is_some() || tid == 0 {
             tid = next_pid(tid);
         }
+        let cpu = self.place_new(i, k);
         let caller = &self.slots[i].as_ref().ok_or(Errno::ESRCH)?.process;
         let mut thread = caller.thread(tid);
+        thread.cpu = cpu;
         if flags & CLONE_CHILD_CLEARTID != 0 {
             thread.clear_child_tid = child_tid;
         }
-        k.borrow(tid, caller.pid)?;
+        k.borrow(tid, caller.pid, cpu)?;
         // The thread runs in the caller's memory: both tid words are written there.
         for (flag, at) in [
             (CLONE_PARENT_SETTID, parent_tid),
@@ -163,6 +165,7 @@ impl System {
             state: State::Starting(start),
             stopped: false,
             report: None,
+            waited: false,
         });
         self.next_pid = next_pid(tid);
         Ok(tid as u64)

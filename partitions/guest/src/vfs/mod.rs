@@ -25,6 +25,7 @@
 //! Linux's `ELOOP` limit), components up to [`NAME_MAX`] bytes. This module never reads
 //! process memory: the system calls copy the paths in ([`crate::syscall`]).
 
+pub mod cpuinfo;
 pub mod dev;
 pub mod mounted;
 pub mod proc;
@@ -528,6 +529,33 @@ impl<'a> Fs<'a> {
             Device::Port(i) => self.ports.get(i as usize).map(|p| (i as usize, p)),
             _ => None,
         }
+    }
+
+    /// The guest's CPUs (bit n: CPU n) where the C libraries and `nproc --all` look:
+    /// `/sys/devices/system/cpu/` with `online`, `possible` and `present` (Linux's list:
+    /// `1-2`) and a directory `cpu<n>` for each. Plain read-only files of the in-memory
+    /// file system, written once: the set never changes while the guest runs.
+    pub fn set_cpus(&mut self, cpus: u64) -> Result<(), Errno> {
+        use core::fmt::Write;
+        let dir = self.mkdir_all("sys/devices/system/cpu")?;
+        let mut list = alloc::string::String::new();
+        let _ = proc::write_cpu_list(&mut list, cpus);
+        list.push('\n');
+        for name in ["online", "possible", "present"] {
+            let node = match self.get(Node::Inode(dir), name.as_bytes()) {
+                Some(node) => node,
+                None => self.create(Node::Inode(dir), name.as_bytes(), 0o444, 0)?,
+            };
+            self.truncate(node, 0, 0)?;
+            self.write(node, 0, list.as_bytes(), 0)?;
+        }
+        let mut path = alloc::string::String::new();
+        for cpu in (0..64).filter(|&c| cpus >> c & 1 != 0) {
+            path.clear();
+            let _ = write!(path, "sys/devices/system/cpu/cpu{cpu}");
+            self.mkdir_all(&path)?;
+        }
+        Ok(())
     }
 
     /// Records the guest's memory size (what `/proc/meminfo` shows as total).

@@ -1,12 +1,14 @@
 //! `/proc`: the files busybox reads about the processes and the system, made from the
 //! process table when they are opened (a snapshot, as a single `read` of a small file on
 //! Linux is). `/proc/self` (a link to the caller's directory), `/proc/<pid>/` with `exe`
-//! (a link to the executable), `stat` (Linux's format, what `ps` parses), `status`
-//! (name, state, ids and size as `Name:\t...` lines) and `cmdline` (the arguments, each
+//! (a link to the executable), `stat` (Linux's format, what `ps` parses; field 39 is the
+//! thread's CPU), `status` (name, state, ids, size and the allowed CPUs as `Name:\t...`
+//! lines) and `cmdline` (the arguments, each
 //! NUL-terminated) and `fd/` (a link per open descriptor: to the file's path,
 //! `/dev/console` or `pipe:[<n>]`; opening one opens what the descriptor has, even a pipe,
 //! as Linux's magic links do: `/dev/fd` links here), `/proc/meminfo`, `/proc/uptime` and
-//! `/proc/mounts`, `/proc/filesystems` (what `mount` without `-t` tries), `/proc/net/dev` and `/proc/net/route` (the interfaces and routes of
+//! `/proc/mounts`, `/proc/filesystems` (what `mount` without `-t` tries), `/proc/cpuinfo`
+//! (a block per CPU of the guest: [`super::cpuinfo`]), `/proc/net/dev` and `/proc/net/route` (the interfaces and routes of
 //! [`crate::net`]). Nothing here can be written, created or removed.
 //!
 //! The process table belongs to [`crate::system`]; the system calls see it through
@@ -28,6 +30,7 @@ pub enum Node {
     Uptime,
     Mounts,
     Filesystems,
+    Cpuinfo,
     /// `/proc/<pid>`.
     Process(u32),
     /// `/proc/<pid>/<file>`.
@@ -57,13 +60,14 @@ const PROCESS_FILES: [(&str, File); 4] = [
     ("status", File::Status),
     ("cmdline", File::Cmdline),
 ];
-const SYSTEM_FILES: [(&str, Node); 6] = [
+const SYSTEM_FILES: [(&str, Node); 7] = [
     ("self", Node::SelfLink),
     ("meminfo", Node::Meminfo),
     ("uptime", Node::Uptime),
     ("mounts", Node::Mounts),
     ("filesystems", Node::Filesystems),
     ("net", Node::Net),
+    ("cpuinfo", Node::Cpuinfo),
 ];
 const NET_FILES: [(&str, Node); 2] = [("dev", Node::NetDev), ("route", Node::NetRoute)];
 
@@ -81,6 +85,9 @@ pub struct ProcInfo<'s> {
     pub exe: &'s str,
     /// Bytes of its address space.
     pub size: u64,
+    /// The CPU its thread runs on, and the CPUs its affinity allows (bit n: CPU n).
+    pub cpu: u32,
+    pub affinity: u64,
     /// Its descriptors.
     pub files: &'s [Option<crate::process::File>],
 }
@@ -96,6 +103,8 @@ impl<'s> ProcInfo<'s> {
             cmdline: &p.cmdline,
             exe: p.exe.as_str(),
             size: p.areas.iter().map(|a| a.end - a.start).sum(),
+            cpu: p.cpu,
+            affinity: p.affinity,
             files: &p.files,
         }
     }
@@ -127,6 +136,8 @@ pub struct Procs<'s> {
     pub others: &'s dyn ProcessTable,
     /// Nanoseconds since the guest started (`uptime`).
     pub now_ns: u64,
+    /// The guest's CPUs (bit n: CPU n; `cpuinfo`, the affinities).
+    pub cpus: u64,
     /// Bytes of the guest's memory pool, and of it in use by the file system
     /// (`meminfo`).
     pub memory: u64,
@@ -151,11 +162,14 @@ impl<'s> Procs<'s> {
                 cmdline: b"",
                 exe: "",
                 size: 0,
+                cpu: 0,
+                affinity: u64::MAX,
                 files: &[],
             },
             tid: pid,
             others: &(),
             now_ns: 0,
+            cpus: 1,
             memory: 0,
             fs_used: 0,
             interfaces: Vec::new(),
@@ -317,6 +331,7 @@ fn ino(node: Node) -> u64 {
         Node::NetDev => BASE + 6,
         Node::NetRoute => BASE + 7,
         Node::Filesystems => BASE + 8,
+        Node::Cpuinfo => BASE + 9,
         Node::Process(pid) => BASE + 16 * (pid as u64 + 1),
         Node::File(pid, f) => BASE + 16 * (pid as u64 + 1) + 1 + f as u64,
         Node::Fds(pid) => BASE + 16 * (pid as u64 + 1) + 8,
@@ -428,7 +443,8 @@ pub fn contents(node: Node, procs: &Procs) -> Option<Vec<u8>> {
             let p = procs.find(pid)?;
             // pid (comm) state ppid pgrp session tty_nr tpgid flags minflt cminflt majflt
             // cmajflt utime stime cutime cstime priority nice num_threads itrealvalue
-            // starttime vsize rss, then 28 more fields nobody here reads.
+            // starttime vsize rss, then 28 more fields (25..=52) of which only 39, the
+            // processor (`ps -o psr`, `top`'s last CPU), says something here.
             let _ = write!(
                 w,
                 "{} ({}) {} {} {} {} 0 -1 4194560 0 0 0 0 0 0 0 0 20 0 1 0 0 {} {}",
@@ -441,8 +457,11 @@ pub fn contents(node: Node, procs: &Procs) -> Option<Vec<u8>> {
                 p.size,
                 p.size / 4096
             );
-            for _ in 0..28 {
-                let _ = w.write_str(" 0");
+            for field in 25..=52 {
+                let _ = match field {
+                    39 => write!(w, " {}", p.cpu),
+                    _ => w.write_str(" 0"),
+                };
             }
             let _ = w.write_str("\n");
         }
@@ -462,7 +481,18 @@ pub fn contents(node: Node, procs: &Procs) -> Option<Vec<u8>> {
                 p.ppid,
                 p.size / 1024
             );
+            // The mask as Linux prints it: hex digits for the CPUs up to the guest's
+            // highest (`nr_cpu_ids`), and as a list.
+            let allowed = p.affinity & procs.cpus;
+            let digits = (64 - procs.cpus.leading_zeros()).div_ceil(4).max(1) as usize;
+            let _ = write!(
+                w,
+                "Cpus_allowed:\t{allowed:0digits$x}\nCpus_allowed_list:\t"
+            );
+            let _ = write_cpu_list(&mut w, allowed);
+            let _ = w.write_str("\nMems_allowed:\t1\nMems_allowed_list:\t0\n");
         }
+        Node::Cpuinfo => super::cpuinfo::write(&mut w, procs.cpus, &super::cpuinfo::CpuId::read()),
         Node::File(pid, File::Cmdline) => {
             let p = procs.find(pid)?;
             text.extend_from_slice(p.cmdline);
@@ -470,6 +500,31 @@ pub fn contents(node: Node, procs: &Procs) -> Option<Vec<u8>> {
         _ => return None,
     }
     Some(text)
+}
+
+/// CPU mask `mask` as Linux's lists say it: ascending ranges, `1-2` or `0,3-5`.
+pub fn write_cpu_list(w: &mut impl Write, mask: u64) -> core::fmt::Result {
+    let mut cpu = 0;
+    let mut first = true;
+    while cpu < 64 {
+        if mask >> cpu & 1 == 0 {
+            cpu += 1;
+            continue;
+        }
+        let start = cpu;
+        while cpu < 64 && mask >> cpu & 1 != 0 {
+            cpu += 1;
+        }
+        if !first {
+            w.write_str(",")?;
+        }
+        first = false;
+        match cpu - 1 - start {
+            0 => write!(w, "{start}")?,
+            _ => write!(w, "{start}-{}", cpu - 1)?,
+        }
+    }
+    Ok(())
 }
 
 struct VecWriter<'v>(&'v mut Vec<u8>);

@@ -210,6 +210,8 @@ fn proc_shows_the_processes() {
                 cmdline: b"sleep\x0010\x00",
                 exe: "bin/busybox",
                 size: 8192,
+                cpu: 2,
+                affinity: 0b1100,
                 files: &[],
             })
         }
@@ -222,6 +224,7 @@ fn proc_shows_the_processes() {
     let mut procs = Procs::alone(1);
     procs.others = &Table;
     procs.now_ns = 12_340_000_000;
+    procs.cpus = 0b110;
     let at = |p: &str, follow| fs.lookup(&procs, ROOT_NODE, p.as_bytes(), follow);
     let read = |p: &str| {
         let Node::Proc(n) = at(p, true).unwrap() else {
@@ -242,6 +245,7 @@ fn proc_shows_the_processes() {
             "mounts",
             "filesystems",
             "net",
+            "cpuinfo",
             "1",
             "7"
         ]
@@ -252,9 +256,59 @@ fn proc_shows_the_processes() {
         status.starts_with("Name:\tsleep\nState:\tZ (zombie)\nTgid:\t7\nPid:\t7\nPPid:\t1\n"),
         "{status}"
     );
+    // The allowed CPUs: its affinity (CPUs 2 and 3) and the guest's (1 and 2).
+    assert!(
+        status.ends_with(
+            "Cpus_allowed:\t4\nCpus_allowed_list:\t2\nMems_allowed:\t1\nMems_allowed_list:\t0\n"
+        ),
+        "{status}"
+    );
     let stat = read("/proc/7/stat");
     assert!(stat.starts_with("7 (sleep) Z 1 7 7 0 -1 "), "{stat}");
     assert_eq!(stat.split(' ').count(), 52, "{stat}");
+    assert_eq!(
+        stat.trim_end().split(' ').nth(38),
+        Some("2"),
+        "field 39: its CPU"
+    );
+    // A block per CPU of the guest, in Linux's format.
+    let cpuinfo = read("/proc/cpuinfo");
+    let processors: Vec<&str> = cpuinfo
+        .lines()
+        .filter(|l| l.starts_with("processor"))
+        .collect();
+    assert_eq!(
+        processors,
+        ["processor\t: 1", "processor\t: 2"],
+        "{cpuinfo}"
+    );
+    let blocks: Vec<&str> = cpuinfo.split_terminator("\n\n").collect();
+    assert_eq!(blocks.len(), 2, "{cpuinfo}");
+    for (block, cpu) in blocks.iter().zip([1, 2]) {
+        let field = |name: &str| {
+            block
+                .lines()
+                .find_map(|l| l.split_once(':').filter(|(k, _)| k.trim_end() == name))
+                .map(|(_, v)| v.trim().to_string())
+        };
+        assert_eq!(field("core id"), Some(cpu.to_string()), "{block}");
+        assert_eq!(field("siblings"), Some("2".into()));
+        for name in ["vendor_id", "model name", "cpu family", "model", "flags"] {
+            assert!(field(name).is_some(), "{name} in {block}");
+        }
+        assert!(block.ends_with("power management:"), "{block}");
+    }
+    let mut list = String::new();
+    for (mask, text) in [
+        (0b110, "1-2"),
+        (0b1010, "1,3"),
+        (0b10_1111, "0-3,5"),
+        (0, ""),
+    ] {
+        list.clear();
+        proc::write_cpu_list(&mut list, mask).unwrap();
+        assert_eq!(list, text);
+    }
     assert_eq!(read("/proc/uptime"), "12.34 12.34\n");
     assert!(read("/proc/mounts").starts_with("rootfs / rootfs rw 0 0\n"));
     assert!(read("/proc/meminfo").starts_with("MemTotal:"));
