@@ -20,6 +20,7 @@ pub mod esp;
 pub mod forte;
 pub mod fortebench;
 pub mod guest;
+pub mod guestsmpbench;
 pub mod iec61499;
 pub mod lint;
 pub mod linux;

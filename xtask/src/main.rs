@@ -138,11 +138,18 @@ enum Cmd {
         /// speedup over one CPU (`scaling_speedup_<n>cpu`); writes target/bench/scaling.json.
         #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native", "plc", "schedules", "net", "ports", "kernel", "disk", "deterministic_time", "iec61499"])]
         scaling: bool,
+        /// Run only the guest's multicore benchmark (not part of the full bench, about 5
+        /// minutes; always real time): one guest gzips 8 files with `xargs -P2 -n1 gzip`
+        /// (tests/configs/guest/gzip_bench.sh), 3 rounds, bound to one CPU and then to two
+        /// of a two-CPU machine; ms a round (`guest_gzip_p2_1cpu`, `guest_gzip_p2_2cpu`)
+        /// and their ratio (`guest_gzip_p2_speedup`); writes target/bench/guest-smp.json.
+        #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native", "plc", "schedules", "net", "ports", "kernel", "disk", "deterministic_time", "iec61499", "scaling"])]
+        guest_smp: bool,
         /// Run only the long power-cut test (not part of the full bench): scenario
         /// `store_power_cut` with CUTS random power cuts instead of the ordinary run's 20
         /// (`cargo xtask test store_power_cut --scenarios-only` with WARDEN_POWER_CUTS=CUTS;
         /// WARDEN_POWER_CUT_SEED replays a seed); prints each cut and the seed.
-        #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native", "plc", "schedules", "net", "ports", "kernel", "disk", "deterministic_time", "iec61499", "scaling"])]
+        #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native", "plc", "schedules", "net", "ports", "kernel", "disk", "deterministic_time", "iec61499", "scaling", "guest_smp"])]
         power_cut: bool,
         /// Power cuts of `--power-cut`.
         #[arg(
@@ -240,6 +247,9 @@ fn main() -> ExitCode {
         } => soak(frames),
         Cmd::Bench { hostile: true, .. } => hostile(),
         Cmd::Bench { scaling: true, .. } => scaling_bench(),
+        Cmd::Bench {
+            guest_smp: true, ..
+        } => guest_smp_bench(),
         Cmd::Bench {
             power_cut: true,
             cuts,
@@ -963,6 +973,14 @@ fn scaling_bench() -> Result<bool> {
     let system = artifacts::build(true, KernelVariant::Production)?;
     let metrics = xtask::scalingbench::run(&qemu, &system, &xtask::target_dir().join("bench"))?;
     print_and_write(&metrics, "scaling.json")
+}
+
+/// `bench --guest-smp`: only the guest's multicore benchmark (`xtask::guestsmpbench`).
+fn guest_smp_bench() -> Result<bool> {
+    let qemu = tools::ensure_qemu()?;
+    let system = artifacts::build(true, KernelVariant::Production)?;
+    let metrics = xtask::guestsmpbench::run(&qemu, &system, &xtask::target_dir().join("bench"))?;
+    print_and_write(&metrics, "guest-smp.json")
 }
 
 /// `bench --hostile`: only the attack systems (see [`hostile_lateness`]).
