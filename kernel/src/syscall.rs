@@ -811,7 +811,6 @@ fn set_attribute(
         }
         ThreadAttribute::Cpu => k.set_cpu(target, value),
         ThreadAttribute::FollowsCallers => {
-            k.require(caller_task, Abilities::SCHEDULING)?;
             k.threads[target].follows_callers = match value {
                 0 | 1 => value == 1,
                 _ => return Err(Error::InvalidArgument),

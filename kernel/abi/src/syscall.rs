@@ -434,7 +434,8 @@ codes::code_enum! {
         /// 1: the thread moves to the CPU of each thread whose message it takes, so a
         /// server's work runs on its caller's CPU, in its caller's windows there, never in
         /// another CPU's; 0 (the default): it stays (other values: `InvalidArgument`). A
-        /// move that [`Self::Cpu`] would refuse is not made. Needs `SCHEDULING`.
+        /// move that [`Self::Cpu`] would refuse is not made (it follows its callers among its
+        /// partition's CPUs only).
         FollowsCallers = 9 => "follows_callers",
     }
 }

@@ -3,7 +3,7 @@
 # two CPUs: 8 files gzipped by `xargs -P2` (two gzips at a time), ROUNDS times; each round
 # prints `round <n> cs <centiseconds>` from /proc/uptime, then the files are gunzipped for
 # the next. `gzip bench done` ends the run.
-ROUNDS=3
+ROUNDS=5
 # /proc/uptime's first field in centiseconds.
 now() {
 	read up _ < /proc/uptime
