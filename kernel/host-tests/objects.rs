@@ -557,6 +557,40 @@ fn senders_queue_by_priority_then_fifo() {
 }
 
 #[test]
+fn each_cpus_timer_serves_its_own_threads_time_outs() {
+    use crate::thread::NEVER;
+    let mut f = Fixture::new();
+    f.k.online = 2;
+    let (a, b) = (f.thread(ROOT, 10), f.thread(ROOT, 10));
+    f.k.set_cpu(b, 1).unwrap();
+    f.sys(a, Call::NotifyWait, [1, 700, 0, 0, 0, 0]);
+    f.sys(b, Call::NotifyWait, [1, 300, 0, 0, 0, 0]);
+    let deadlines = |f: &Fixture| (f.k.cores[0].next_deadline, f.k.cores[1].next_deadline);
+    assert_eq!(
+        deadlines(&f),
+        (700, 300),
+        "CPU 0 is not woken for CPU 1's time-out"
+    );
+    assert_eq!(
+        f.k.next_event(0),
+        700,
+        "CPU 0's timer: its own time-out (no windows)"
+    );
+    // A thread that moved while it waited times out at its deadline all the same.
+    f.k.set_cpu(a, 1).unwrap();
+    f.k.expire_timeouts(300);
+    assert_eq!(f.k.threads[b].state(), State::Ready);
+    assert_eq!(
+        deadlines(&f),
+        (NEVER, 700),
+        "each CPU's deadlines recomputed"
+    );
+    f.k.expire_timeouts(700);
+    assert_eq!(f.k.threads[a].context().rax, err(Error::TimedOut));
+    assert_eq!(deadlines(&f), (NEVER, NEVER));
+}
+
+#[test]
 fn timeouts_expire_at_their_deadline() {
     let mut f = Fixture::new();
     let a = f.thread(ROOT, 10);
@@ -564,13 +598,13 @@ fn timeouts_expire_at_their_deadline() {
     f.sys(a, Call::Receive, [0, 1000, 0, 0, 0, 0]);
     let bid = f.id(b);
     f.sys(b, Call::NotifyWait, [1, 500, 0, 0, 0, 0]);
-    assert_eq!(f.k.next_deadline, 500);
+    assert_eq!(f.k.cores[0].next_deadline, 500);
     f.k.expire_timeouts(499);
     assert_eq!(f.k.threads[a].state(), State::Receiving { from: None });
     f.k.expire_timeouts(500);
     assert_eq!(f.k.threads[b].state(), State::Ready);
     assert_eq!(f.k.threads[b].context().rax, err(Error::TimedOut));
-    assert_eq!(f.k.next_deadline, 1000);
+    assert_eq!(f.k.cores[0].next_deadline, 1000);
     f.k.expire_timeouts(1000);
     assert_eq!(f.k.threads[a].context().rax, err(Error::TimedOut));
     // A queued sender times out and leaves the queue.

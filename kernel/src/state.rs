@@ -72,8 +72,6 @@ pub struct Kernel {
     /// Physical memory the root task may map.
     pub(crate) user_memory: [PhysRegion; ROOT_INFO_MAX_REGIONS],
     pub(crate) user_memory_count: usize,
-    /// Earliest deadline of any blocked thread (maybe stale-early after a wake-up).
-    pub(crate) next_deadline: u64,
     /// Schedules of time windows.
     pub(crate) time: TimeTable,
     /// CPU time per time partition (all CPUs), in TSC ticks.
@@ -97,6 +95,8 @@ pub struct Core {
     pub active_partition: Option<u8>,
     /// Absolute time of its next window boundary (`NEVER` without a schedule).
     pub next_boundary: u64,
+    /// Earliest deadline of a blocked thread on it (maybe stale-early after a wake-up).
+    pub next_deadline: u64,
     /// Its timer must be programmed again before it runs on.
     pub timer_dirty: bool,
     /// Its running thread's FS/GS base changed and must be reloaded.
@@ -118,6 +118,7 @@ impl Core {
         running: None,
         active_partition: None,
         next_boundary: NEVER,
+        next_deadline: NEVER,
         timer_dirty: false,
         reload_bases: false,
         running_partition: None,
@@ -165,7 +166,6 @@ impl Kernel {
             health_monitor: ThreadId::OWN,
             user_memory: [PhysRegion { start: 0, pages: 0 }; ROOT_INFO_MAX_REGIONS],
             user_memory_count: 0,
-            next_deadline: NEVER,
             time: TimeTable::new(),
             cpu_ticks: [0; TIME_PARTITIONS],
             irqs: crate::irq::Irqs::new(),

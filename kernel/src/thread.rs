@@ -432,10 +432,10 @@ impl Kernel {
     /// Blocks `t` in `state` until `deadline` (absolute ns; [`NEVER`] for none).
     pub fn block(&mut self, t: ThreadIdx, state: State, deadline: u64) {
         self.threads[t].deadline = deadline;
-        if deadline < self.next_deadline {
-            self.next_deadline = deadline;
-            // The boot CPU's timer serves the time-outs (`Kernel::next_event`).
-            self.cores[0].timer_dirty = true;
+        // Its CPU's timer serves its time-out (`Kernel::next_event`).
+        let core = &mut self.cores[self.threads[t].cpu as usize];
+        if deadline < core.next_deadline {
+            (core.next_deadline, core.timer_dirty) = (deadline, true);
         }
         self.set_state(t, state);
     }
@@ -598,23 +598,23 @@ impl Kernel {
         Ok(())
     }
 
-    /// Times out every blocked thread whose deadline is at or before `now` and recomputes
-    /// the next deadline. Bounded by the thread table.
+    /// Times out every blocked thread whose deadline is at or before `now` (of any CPU: a
+    /// thread may have moved since it blocked) and recomputes each CPU's next deadline.
+    /// Bounded by the thread table.
     pub fn expire_timeouts(&mut self, now: u64) {
-        let mut next = NEVER;
+        let mut next = [NEVER; abi::machine::MAX_CPUS];
         for t in ThreadIdx::all() {
-            let deadline = self.threads[t].deadline;
-            if deadline == NEVER {
-                continue;
-            }
+            let (deadline, cpu) = (self.threads[t].deadline, self.threads[t].cpu as usize);
             if deadline <= now {
                 self.abort_wait(t, Error::TimedOut);
-            } else {
-                next = next.min(deadline);
+            } else if deadline != NEVER {
+                next[cpu] = next[cpu].min(deadline);
             }
         }
-        self.next_deadline = next;
-        self.cores[0].timer_dirty = true;
+        for (core, next) in self.cores.iter_mut().zip(next) {
+            core.timer_dirty |= core.next_deadline != next;
+            core.next_deadline = next;
+        }
     }
 
     /// Ends whatever `t` waits for with `error` (timeout or peer gone).

@@ -271,7 +271,7 @@ impl Kernel {
     /// thread, whatever interrupt it did or did not take (another CPU may have woken a
     /// thread of a window that has just ended here, before this CPU's timer said so).
     pub fn catch_up(&mut self, now: u64) {
-        if now >= self.next_deadline {
+        if now >= self.core().next_deadline {
             self.expire_timeouts(now);
         }
         if now >= self.core().next_boundary {
@@ -289,7 +289,7 @@ impl Kernel {
     }
 
     /// When the entering CPU's timer must fire next: the next window boundary of any CPU,
-    /// and on the boot CPU, which serves every time-out, the earliest time-out too.
+    /// or the earliest time-out of its own threads.
     ///
     /// Every CPU's timer fires at every CPU's boundaries, and the first CPU to take the
     /// interrupt interrupts those whose boundary passed ([`Kernel::on_timer`]). A CPU
@@ -304,10 +304,7 @@ impl Kernel {
             .map(|(_, core)| core.next_boundary)
             .min()
             .unwrap_or(NEVER);
-        match self.cpu {
-            0 => self.next_deadline.min(boundary),
-            _ => boundary,
-        }
+        self.core().next_deadline.min(boundary)
     }
 
     /// Charges the entering CPU's time since its last call (TSC `now`) to the partition
