@@ -6,7 +6,8 @@
 //! are those the guest passes; the others are listed there with what they wait for.
 
 //! Scenario `guest_threads` runs the `threads` area the same way (configuration
-//! `tests/configs/guest_threads.toml`).
+//! `tests/configs/guest_threads.toml`), and `guest_threads_smp` the `threads` and
+//! `memory` areas in a guest on two CPUs (`tests/configs/guest_threads_smp.toml`).
 
 use scenarios::{boot, check, guest_stdout};
 
@@ -18,6 +19,11 @@ fn guest_linux() {
 #[test]
 fn guest_threads() {
     linux_tests("guest_threads", "tests/configs/guest_threads.toml");
+}
+
+#[test]
+fn guest_threads_smp() {
+    linux_tests("guest_threads_smp", "tests/configs/guest_threads_smp.toml");
 }
 
 /// Boots scenario `scenario` (configuration `config`) and expects each guest partition
