@@ -44,9 +44,6 @@ fn drop_lower_half() {
     x86_64::instructions::tlb::flush_all();
 }
 
-/// The period of the turn clock where the CPUs run in turns ([`pit::start_turn_clock`]).
-const TURN_CLOCK_US: u64 = 20;
-
 pub fn start(boot_info: u64) -> ! {
     let entry_tsc = cpu::rdtsc();
     drop_lower_half();
@@ -208,11 +205,14 @@ pub fn start(boot_info: u64) -> ! {
     crate::arch::syscall::init(0, crate::arch::stack::top(), crate::arch::gdt::boot_tss());
     let online = crate::arch::smp::start_application_processors(machine, apic_id, regions);
     // An emulator that runs the CPUs in turns on one host thread ends a turn only at the
-    // machine's next timer deadline: one every 20 us bounds how long a busy CPU keeps the
+    // machine's next timer deadline: a turn clock bounds how long a busy CPU keeps the
     // others waiting. CPUs side by side need none (and an emulator's would cost them).
     if online > 1 && info.cpus_in_turns != 0 {
-        pit::start_turn_clock(TURN_CLOCK_US * 1000);
-        kprintln!("smp: the CPUs run in turns: PIT turn clock every {TURN_CLOCK_US} us");
+        pit::TURNS.store(true, core::sync::atomic::Ordering::Relaxed);
+        kprintln!(
+            "smp: the CPUs run in turns: PIT turn clock every {} us once a thread is on another CPU than CPU 0",
+            pit::TURN_NS / 1000
+        );
     }
     {
         let mut k = crate::arch::entry::KERNEL.lock();

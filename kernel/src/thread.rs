@@ -577,6 +577,7 @@ impl Kernel {
         self.run.remove(t.position());
         self.threads[t].cpu = cpu as u8;
         self.requeue(t);
+        crate::arch::pit::start_turn_clock(cpu as u8);
         Ok(())
     }
 

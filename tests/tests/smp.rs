@@ -32,12 +32,18 @@ fn smp_boot() {
         "the boot CPU did not count 4 CPUs online",
     );
     // QEMU's deterministic time runs the CPUs in turns on one host thread, and xtask says
-    // so (fw_cfg opt/warden/cpus-in-turns).
+    // so (fw_cfg opt/warden/cpus-in-turns); with every thread on the boot CPU the clock
+    // never starts, so the idle machine's time is skipped as on one CPU.
     check(
         &o,
-        o.line("smp: the CPUs run in turns: PIT turn clock every 20 us")
+        o.line("smp: the CPUs run in turns: PIT turn clock every 20 us once a thread is on another CPU than CPU 0")
             .is_some(),
-        "the kernel did not start the turn clock the host asked for",
+        "the kernel did not announce the turn clock the host asked for",
+    );
+    check(
+        &o,
+        o.line("smp: PIT turn clock started").is_none(),
+        "the turn clock started although no thread ran on another CPU",
     );
     check(
         &o,
@@ -95,6 +101,11 @@ fn smp_windows() {
             "a task's granted port works on the other CPU",
             "a task without ports cannot use those of a task killed on that CPU (#GP)",
         ],
+    );
+    check(
+        &o,
+        o.line("smp: PIT turn clock started (a thread on CPU 1)").is_some(),
+        "the turn clock did not start when a thread went to CPU 1",
     );
     // The shares and round trips, for whoever runs it with --nocapture.
     for line in o.lines.iter().filter(|l| l.contains("] smp: ")) {

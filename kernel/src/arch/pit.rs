@@ -6,6 +6,7 @@
 //! instruction (docs/architecture.md, "Multicore").
 
 use super::cpu::{inb, outb, rdtsc};
+use core::sync::atomic::{AtomicBool, Ordering};
 
 pub const FREQUENCY_HZ: u64 = 1_193_182;
 
@@ -32,11 +33,24 @@ pub fn tsc_ticks_for_ms(ms: u64) -> Option<u64> {
     None
 }
 
-/// Lets channel 0 count down in a loop, wrapping every `period_ns` (rate generator); its
-/// interrupt (ISA line 0) reaches no CPU: the IOAPIC keeps its line masked (no partition
-/// may own it) and the local APICs' LINT0, where the 8259s would deliver it, is masked.
-pub fn start_turn_clock(period_ns: u64) {
-    let count = (FREQUENCY_HZ * period_ns / 1_000_000_000).clamp(2, 0xffff) as u16;
+/// The turn clock's period.
+pub const TURN_NS: u64 = 20_000;
+/// The CPUs run in turns and the turn clock has not started yet.
+pub static TURNS: AtomicBool = AtomicBool::new(false);
+
+/// Starts the turn clock when a thread is first put on a CPU other than CPU 0
+/// ([`TURNS`]): until then the others only halt, their turns are empty, and a clock would
+/// cost every idle moment of the machine (QEMU's deterministic time skips idle time only
+/// up to its next timer deadline). Lets channel 0 count down in a loop, wrapping every
+/// [`TURN_NS`] (rate generator); its interrupt (ISA line 0) reaches no CPU: the IOAPIC
+/// keeps its line masked (no partition may own it) and the local APICs' LINT0, where the
+/// 8259s would deliver it, is masked.
+pub fn start_turn_clock(cpu: u8) {
+    if cpu == 0 || !TURNS.swap(false, Ordering::Relaxed) {
+        return;
+    }
+    crate::kprintln!("smp: PIT turn clock started (a thread on CPU {cpu})");
+    let count = (FREQUENCY_HZ * TURN_NS / 1_000_000_000).clamp(2, 0xffff) as u16;
     outb(0x43, 0b0011_0100); // channel 0, lobyte/hibyte, mode 2, binary
     outb(0x40, count as u8);
     outb(0x40, (count >> 8) as u8);
