@@ -2913,7 +2913,8 @@ impl Validator<'_, '_> {
         let mut schedules = Vec::new();
         let mut window_owners: Vec<Vec<usize>> = Vec::new();
         let mut names: Vec<(String, usize)> = Vec::new();
-        // Partitions some window names (even a window with other errors).
+        // Partitions some window names (even a window with other errors), with the CPUs of
+        // their windows.
         let mut named = vec![None; partitions.len()];
         let entries = self.at_most(
             entries,

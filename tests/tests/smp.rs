@@ -104,7 +104,8 @@ fn smp_windows() {
     );
     check(
         &o,
-        o.line("smp: PIT turn clock started (a thread on CPU 1)").is_some(),
+        o.line("smp: PIT turn clock started (a thread on CPU 1)")
+            .is_some(),
         "the turn clock did not start when a thread went to CPU 1",
     );
     // The shares and round trips, for whoever runs it with --nocapture.

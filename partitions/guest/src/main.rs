@@ -833,8 +833,7 @@ struct GuestHost<'p> {
     port_waiting: bool,
     /// The scheduling policy: the level of each process's thread.
     sched: Scheduler,
-    /// The guest's CPUs (bit n: CPU n), and the one its own thread runs on, where every
-    /// thread it creates starts.
+    /// The guest's CPUs (bit n: CPU n), and the lowest, where its own thread starts.
     cpus: u64,
     home: u32,
     /// A thread is to move to another CPU at its next message ([`Task::pending_cpu`]).
@@ -868,8 +867,9 @@ impl<'p> GuestHost<'p> {
     }
 
     /// Creates and starts a process's thread in `task` on `cpu` (see [`start_thread`]);
-    /// with the CPU it got. A CPU the kernel refuses (not online) is logged and left out
-    /// of the guest's from then on, and the thread runs on the guest's own.
+    /// with the CPU it got. A CPU the kernel refuses (not online; syssw checked them all
+    /// at start, so this is a defence) is logged and left out of the guest's from then on,
+    /// and the thread stays where the guest's thread made it, taken to be the lowest.
     fn start_on(&mut self, task: TaskId, cpu: u32) -> Result<(ThreadId, u32), Errno> {
         // With several CPUs every thread is put on its CPU, not trusting where it starts.
         let wanted = (self.cpus.count_ones() > 1 || cpu != self.home).then_some(cpu);

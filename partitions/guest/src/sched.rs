@@ -86,7 +86,8 @@
 //! turn and both run all the time. What happens on one CPU is charged there: between two
 //! looks the sender of the message ran on its CPU, and on every other CPU the model's
 //! choice there ran (one CPU's messages say nothing about another's spinner). The guest's
-//! own thread stays on its CPU and serves every CPU's messages; the decisions are the same
+//! own thread follows its callers (`main.rs`): it serves each message on its sender's CPU,
+//! in the time charged to the sender, as on one CPU; the decisions are the same
 //! as before for each CPU, made in a pass per CPU when a decision is remade. A one-CPU
 //! guest is the policy above unchanged.
 //!
