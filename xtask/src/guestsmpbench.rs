@@ -13,7 +13,7 @@
 //! maximum over the rounds) and `guest_gzip_p2_speedup` (the medians' ratio).
 
 use crate::bench::Metric;
-use crate::qemu::{self, Ending, RunOptions};
+use crate::qemu::Ending;
 use anyhow::{Context, Result, bail};
 use std::path::Path;
 use std::time::Duration;
@@ -59,27 +59,13 @@ pub fn run(
     let mut metrics = Vec::new();
     let mut medians = Vec::new();
     for (n, cpus) in [(1, "0"), (2, "0, 1")] {
-        let config = dir.join(format!("cpus{n}.toml"));
-        std::fs::write(&config, self::config(cpus))?;
-        let entries = crate::esp::standard_entries(system, Some(&config))?;
-        let run_dir = dir.join(format!("cpus{n}"));
-        let esp = crate::esp::assemble(&run_dir.join("esp"), system, &entries)?;
         eprintln!(
             "xtask: the guest gzips 8 files with xargs -P2 on {n} CPU(s), {ROUNDS} rounds (real time, {host_cores} host cores)"
         );
-        let outcome = qemu::run(
-            qemu,
-            &RunOptions {
-                esp,
-                timeout: Some(RUN_TIME),
-                echo: false,
-                work_dir: run_dir.join("state"),
-                deterministic_time: false,
-                com2: qemu::Com2::Unconnected,
-                done_when: vec![DONE.to_string()],
-                extra_args: Vec::new(),
-            },
-        )?;
+        let boot = (format!("cpus{n}"), self::config(cpus));
+        let done = vec![DONE.to_string()];
+        let outcome =
+            crate::scalingbench::boot_real_time(qemu, system, &dir, boot, RUN_TIME, done)?;
         if outcome.ending != Ending::Done {
             bail!(
                 "the guest on {n} CPU(s) did not finish ({:?})\n{}",

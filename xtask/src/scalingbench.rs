@@ -74,28 +74,12 @@ pub fn run(
     let mut metrics = Vec::new();
     let mut one_cpu = None;
     for cpus in 1..=MAX_CPUS {
-        let config = dir.join(format!("cpus{cpus}.toml"));
-        std::fs::write(&config, self::config(cpus))?;
-        let entries = crate::esp::standard_entries(system, Some(&config))?;
-        let run_dir = dir.join(format!("cpus{cpus}"));
-        let esp = crate::esp::assemble(&run_dir.join("esp"), system, &entries)?;
         eprintln!(
             "xtask: booting {cpus} PLC partition(s) on {cpus} CPU(s) for {} s (real time, {host_cores} host cores)",
             (WARM_UP_MS + MEASURED_MS) / 1000
         );
-        let outcome = qemu::run(
-            qemu,
-            &RunOptions {
-                esp,
-                timeout: Some(RUN_TIME),
-                echo: false,
-                work_dir: run_dir.join("state"),
-                deterministic_time: false,
-                com2: qemu::Com2::Unconnected,
-                done_when: Vec::new(),
-                extra_args: Vec::new(),
-            },
-        )?;
+        let boot = (format!("cpus{cpus}"), self::config(cpus));
+        let outcome = boot_real_time(qemu, system, &dir, boot, RUN_TIME, Vec::new())?;
         if outcome.ending != Ending::TimedOut {
             bail!(
                 "the {cpus}-CPU scaling system ended before its time ({:?})\n{}",
@@ -132,6 +116,37 @@ pub fn run(
         ));
     }
     Ok(metrics)
+}
+
+/// Boots the system of configuration `text` (written to `dir/<name>.toml`, beside the
+/// files it names; its ESP and state in `dir/<name>/`) on real time until `done_when` has
+/// appeared or `timeout` passed: the runs of the multicore benchmarks.
+pub(crate) fn boot_real_time(
+    qemu: &crate::tools::Qemu,
+    system: &crate::artifacts::Artifacts,
+    dir: &Path,
+    (name, text): (String, String),
+    timeout: Duration,
+    done_when: Vec<String>,
+) -> Result<qemu::Outcome> {
+    let config = dir.join(format!("{name}.toml"));
+    std::fs::write(&config, text)?;
+    let entries = crate::esp::standard_entries(system, Some(&config))?;
+    let run_dir = dir.join(&name);
+    let esp = crate::esp::assemble(&run_dir.join("esp"), system, &entries)?;
+    qemu::run(
+        qemu,
+        &RunOptions {
+            esp,
+            timeout: Some(timeout),
+            echo: false,
+            work_dir: run_dir.join("state"),
+            deterministic_time: false,
+            com2: qemu::Com2::Unconnected,
+            done_when,
+            extra_args: Vec::new(),
+        },
+    )
 }
 
 /// `partition`'s executions in 60 s: its last watch line's count (`[<partition>] plc:
