@@ -138,7 +138,7 @@ enum Cmd {
         /// speedup over one CPU (`scaling_speedup_<n>cpu`); writes target/bench/scaling.json.
         #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native", "plc", "schedules", "net", "ports", "kernel", "disk", "deterministic_time", "iec61499"])]
         scaling: bool,
-        /// Run only the guest's multicore benchmark (not part of the full bench, about 5
+        /// Run only the guest's multicore benchmark (not part of the full bench, about 3
         /// minutes; always real time): one guest gzips 8 files with `xargs -P2 -n1 gzip`
         /// (tests/configs/guest/gzip_bench.sh), 5 rounds, bound to one CPU and then to two
         /// of a two-CPU machine; ms a round (`guest_gzip_p2_1cpu`, `guest_gzip_p2_2cpu`)
