@@ -375,12 +375,38 @@ pub fn respond(
 
 /// The bytes of `area` that `count` bits or words from `first` cover, if it has them.
 fn span(area: &[u8], bits: bool, first: u32, count: u16) -> Option<core::ops::Range<usize>> {
+    let bytes = bytes_of(bits, first, count);
+    (bytes.end <= area.len()).then_some(bytes)
+}
+
+/// The bytes that `count` bits or words from `first` cover.
+fn bytes_of(bits: bool, first: u32, count: u16) -> core::ops::Range<usize> {
     let (from, to) = if bits {
         (first / 8, (first + u32::from(count)).div_ceil(8))
     } else {
         (first * 2, (first + u32::from(count)) * 2)
     };
-    (to as usize <= area.len()).then_some(from as usize..to as usize)
+    from as usize..to as usize
+}
+
+/// The area and bytes a write request (`pdu`) covers; `None` for a read or a request
+/// that does not decode. A server that keeps the image's values in a second place too
+/// (the soft-PLC: its program's variables) carries these bytes over after a write that
+/// [`respond`] carried out (its response is no exception).
+pub fn written(pdu: &[u8]) -> Option<(Area, core::ops::Range<usize>)> {
+    let (table, start, quantity) = match decode_request(pdu).ok()? {
+        Request::Read { .. } => return None,
+        Request::WriteCoil { address, .. } => (Table::Coils, address, 1),
+        Request::WriteRegister { address, .. } => (Table::HoldingRegisters, address, 1),
+        Request::WriteCoils {
+            start, quantity, ..
+        } => (Table::Coils, start, quantity),
+        Request::WriteRegisters {
+            start, quantity, ..
+        } => (Table::HoldingRegisters, start, quantity),
+    };
+    let place = place(table, start, quantity)?;
+    Some((place.area, bytes_of(table.is_bits(), place.first, quantity)))
 }
 
 /// Carries out `request`, writing the response data (after the function code) into `out`.

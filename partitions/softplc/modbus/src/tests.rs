@@ -126,6 +126,13 @@ fn writes_land_in_the_image() {
     let regs = [16, 0x30, 4, 0, 2, 4, 0, 1, 0x80, 0];
     assert_eq!(call(&SERVER, &mut image, &regs), [16, 0x30, 4, 0, 2]);
     assert_eq!(&image.memory[8..12], &[1, 0, 0, 0x80]);
+    // Where each write landed, as `written` says.
+    assert_eq!(written(&[5, 0, 9, 0xFF, 0]), Some((Area::Output, 1..2)));
+    assert_eq!(written(&[6, 0, 2, 0xAB, 0xCD]), Some((Area::Output, 4..6)));
+    assert_eq!(written(&coils), Some((Area::Memory, 0..2)));
+    assert_eq!(written(&regs), Some((Area::Memory, 8..12)));
+    assert_eq!(written(&[3, 0x30, 0, 0, 1]), None, "a read");
+    assert_eq!(written(&[6, 0, 2]), None, "cut short");
 }
 
 #[test]
@@ -321,6 +328,24 @@ proptest! {
         let answer = call(&SERVER, &mut image, &pdu);
         prop_assert!(answer[0] == function || (answer[0] == function | 0x80 && answer.len() == 2));
         prop_assert_eq!(&image.input, &(0..16).collect::<Vec<u8>>(), "inputs are never written");
+        // What changed lies in what `written` says the request covers.
+        let before = Image::new();
+        let changed = |area: Area| -> Vec<usize> {
+            let (now, was) = match area {
+                Area::Input => (&image.input, &before.input),
+                Area::Output => (&image.output, &before.output),
+                Area::Memory => (&image.memory, &before.memory),
+            };
+            (0..now.len()).filter(|&i| now[i] != was[i]).collect()
+        };
+        for area in [Area::Output, Area::Memory] {
+            for byte in changed(area) {
+                prop_assert!(
+                    written(&pdu).is_some_and(|(a, bytes)| a == area && bytes.contains(&byte)),
+                    "{:?} byte {} changed outside {:?}", area, byte, written(&pdu)
+                );
+            }
+        }
     }
 
     #[test]

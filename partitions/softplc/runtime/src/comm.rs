@@ -137,30 +137,25 @@ impl Default for Exchange {
 
 impl ProcessImage for Areas {
     fn area(&self, area: Area) -> &[u8] {
-        match area {
-            Area::Input => &self.input,
-            Area::Output => &self.output,
-            Area::Memory => &self.memory,
-        }
+        Areas::area(self, area)
     }
 
     fn area_mut(&mut self, area: Area) -> &mut [u8] {
-        match area {
-            Area::Input => &mut self.input,
-            Area::Output => &mut self.output,
-            Area::Memory => &mut self.memory,
-        }
+        Areas::area_mut(self, area)
     }
 }
 
 /// The control process's part, between cycles: answers every waiting Modbus request on
 /// `areas` (`running`: whether any task of the program runs; writes are refused when
-/// none does). Returns how many it answered.
+/// none does), calling `wrote` with the area and bytes of each write carried out (the
+/// caller puts them into the program's variables: [`crate::scan::take_written`]).
+/// Returns how many it answered.
 pub fn serve_modbus(
     exchange: &mut Exchange,
     modbus: &Modbus,
     running: bool,
     areas: &mut Areas,
+    mut wrote: impl FnMut(Area, core::ops::Range<usize>, &Areas),
 ) -> usize {
     let server = Server {
         unit: modbus.unit,
@@ -180,7 +175,15 @@ pub fn serve_modbus(
         // a closed connection would be (nothing sent).
         let len = match split_frame(&slot.bytes[..slot.len.min(SLOT_BYTES)]) {
             Ok(Frame::Complete { header, pdu, .. }) => {
-                respond(&server, header, pdu, areas, &mut out)
+                let len = respond(&server, header, pdu, areas, &mut out);
+                // A response without the exception bit: a write was carried out.
+                if len > 7
+                    && out[7] & 0x80 == 0
+                    && let Some((area, bytes)) = plc_modbus::written(pdu)
+                {
+                    wrote(area, bytes, areas);
+                }
+                len
             }
             _ => 0,
         };
@@ -862,7 +865,13 @@ mod tests {
             }
             self.plc.run(self.now_ns, &mut self.exchange);
             let modbus = net(1, 1).modbus.unwrap();
-            serve_modbus(&mut self.exchange, &modbus, true, &mut self.areas);
+            serve_modbus(
+                &mut self.exchange,
+                &modbus,
+                true,
+                &mut self.areas,
+                |_, _, _| {},
+            );
             // The online requests, answered by an echo that says the access it saw.
             for slot in self.exchange.slots.iter_mut() {
                 if let (SlotState::Request, Service::Online(access)) = (slot.state, slot.service) {
@@ -1018,7 +1027,12 @@ mod tests {
         exchange.slots[0].len = 5;
         let mut areas = Areas::new();
         let modbus = net(1, 1).modbus.unwrap();
-        assert_eq!(serve_modbus(&mut exchange, &modbus, true, &mut areas), 1);
+        assert_eq!(
+            serve_modbus(&mut exchange, &modbus, true, &mut areas, |_, _, _| {
+                panic!("garbage wrote")
+            }),
+            1
+        );
         assert_eq!(exchange.slots[0].state, SlotState::Response);
         assert_eq!(exchange.slots[0].len, 0);
     }

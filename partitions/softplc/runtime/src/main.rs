@@ -754,7 +754,16 @@ extern "C" fn control() {
                     }
                     if let Some(modbus) = net.modbus {
                         let running = life.rt.any_task_running();
-                        softplc::comm::serve_modbus(&mut exchange, &modbus, running, life.areas);
+                        let (image, machine) = (&life.image, &mut life.machine);
+                        softplc::comm::serve_modbus(
+                            &mut exchange,
+                            &modbus,
+                            running,
+                            life.areas,
+                            |area, bytes, areas| {
+                                softplc::scan::take_written(image, area, bytes, areas, machine)
+                            },
+                        );
                     }
                 }
                 let mut stopped_now = false;

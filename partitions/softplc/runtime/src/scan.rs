@@ -67,6 +67,24 @@ impl Areas {
             memory: [0; MAX_AREA as usize],
         }
     }
+
+    /// The bytes of `area`.
+    pub fn area(&self, area: Area) -> &[u8] {
+        match area {
+            Area::Input => &self.input,
+            Area::Output => &self.output,
+            Area::Memory => &self.memory,
+        }
+    }
+
+    /// The bytes of `area`, to write.
+    pub fn area_mut(&mut self, area: Area) -> &mut [u8] {
+        match area {
+            Area::Input => &mut self.input,
+            Area::Output => &mut self.output,
+            Area::Memory => &mut self.memory,
+        }
+    }
 }
 
 impl Default for Areas {
@@ -83,6 +101,31 @@ pub trait PortIo {
     fn receive(&mut self, port: usize, buf: &mut [u8]) -> Option<(usize, bool)>;
     /// Sends `message` on output port `port`.
     fn send(&mut self, port: usize, message: &[u8]);
+}
+
+/// Puts `bytes` of `area`, written between releases by a network service (a Modbus
+/// write), into the located variables they overlap at once. The process image alone
+/// would not do: when the control process is behind (a cycle outlasted the window), it
+/// ends the same release a second time before the next one begins, and that end copies
+/// the variables' old values back over the image.
+pub fn take_written(
+    image: &Image,
+    area: Area,
+    bytes: core::ops::Range<usize>,
+    areas: &Areas,
+    machine: &mut Machine,
+) {
+    let overlaps = |v: &located::Located| {
+        let from = v.location.byte as usize;
+        let width = v.location.width.bytes() as usize;
+        v.location.area == area && from < bytes.end && bytes.start < from + width
+    };
+    located::copy_in(
+        image.located_vars().filter(overlaps),
+        area,
+        areas.area(area),
+        machine.data_mut(),
+    );
 }
 
 /// Reads every input port into `%I` and sets its validity bit (cleared when the port gave

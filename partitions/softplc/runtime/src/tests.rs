@@ -1214,6 +1214,136 @@ fn markers_keep_their_initial_values() {
     assert_eq!(u16::from_le_bytes([areas.memory[0], areas.memory[1]]), 7);
 }
 
+/// A Modbus write between releases reaches the program even when the control process,
+/// behind after a cycle that outlasted its window, ends the same release a second time
+/// before the next one begins: without [`crate::scan::take_written`] that second end
+/// copies the variable's old value back over the written image.
+#[test]
+fn a_modbus_write_outlives_a_second_end_of_its_release() {
+    use crate::comm::{Exchange, Service, SlotState, serve_modbus};
+    let source = "VAR_GLOBAL sp AT %MW0 : INT := 1000; seen AT %MW1 : INT; END_VAR
+PROGRAM P seen := sp; END_PROGRAM";
+    let plc = Plc::new(source, &[]);
+    let package = Package::parse(&plc.bytes).unwrap();
+    let image = Image::parse(package.program()).unwrap();
+    let modbus = package::Modbus {
+        port: 502,
+        unit: 1,
+        write_outputs: false,
+        write_markers: true,
+    };
+    // Holding register 0x3000 (%MW0) := 600.
+    let write = [0, 1, 0, 0, 0, 6, 1, 6, 0x30, 0, 0x02, 0x58];
+    for take in [true, false] {
+        let mut data = vec![0u8; image.data_size() as usize];
+        let (mut stack, mut calls, mut tries) =
+            ([0u64; 64], [CallFrame::EMPTY; 8], [TryFrame::EMPTY; 4]);
+        let mut machine = Machine::new(
+            verify(&image).unwrap(),
+            Memory {
+                data: &mut data,
+                stack: &mut stack,
+                calls: &mut calls,
+                tries: &mut tries,
+            },
+        )
+        .unwrap();
+        let schedule = Schedule::new(&image, PERIOD).unwrap();
+        let task = schedule.order[0];
+        let mut rt = Runtime::new(schedule, PERIOD, SafeValues::new());
+        let (mut wires, mut areas, mut exchange) =
+            (Wires::default(), Areas::new(), Exchange::new());
+        let mut now = 0u64;
+        let mut clock = || {
+            now += 1_000;
+            now
+        };
+        // Release 0: the task's process begins it and runs the cycle, the control process
+        // ends it and serves the write.
+        assert!(rt.begin_release(
+            &mut machine,
+            &image,
+            &package,
+            &mut wires,
+            &mut areas,
+            &mut clock,
+            0
+        ));
+        rt.run_task(task, &mut machine, &image, &mut clock, 0, |_, _| {});
+        rt.end_release(
+            &mut machine,
+            &image,
+            &package,
+            &mut wires,
+            &mut areas,
+            &mut clock,
+        );
+        let slot = &mut exchange.slots[0];
+        (slot.state, slot.service, slot.len) = (SlotState::Request, Service::Modbus, write.len());
+        slot.bytes[..write.len()].copy_from_slice(&write);
+        serve_modbus(
+            &mut exchange,
+            &modbus,
+            true,
+            &mut areas,
+            |area, bytes, areas| {
+                if take {
+                    crate::scan::take_written(&image, area, bytes, areas, &mut machine)
+                }
+            },
+        );
+        assert_eq!(
+            &exchange.slots[0].bytes[..write.len()],
+            &write,
+            "the echo of a write"
+        );
+        // The control process, behind, runs again before release 1 begins.
+        assert!(!rt.begin_release(
+            &mut machine,
+            &image,
+            &package,
+            &mut wires,
+            &mut areas,
+            &mut clock,
+            0
+        ));
+        rt.end_release(
+            &mut machine,
+            &image,
+            &package,
+            &mut wires,
+            &mut areas,
+            &mut clock,
+        );
+        // Release 1.
+        assert!(rt.begin_release(
+            &mut machine,
+            &image,
+            &package,
+            &mut wires,
+            &mut areas,
+            &mut clock,
+            PERIOD
+        ));
+        rt.run_task(task, &mut machine, &image, &mut clock, PERIOD, |_, _| {});
+        rt.end_release(
+            &mut machine,
+            &image,
+            &package,
+            &mut wires,
+            &mut areas,
+            &mut clock,
+        );
+        let word = |i: usize| i16::from_le_bytes([areas.memory[2 * i], areas.memory[2 * i + 1]]);
+        let expected = if take { 600 } else { 1000 };
+        assert_eq!(
+            (word(0), word(1)),
+            (expected, expected),
+            "taken over: {take}"
+        );
+    }
+}
+
 /// A PLC with online access driven like the partition does: scans, requests between them,
 /// and the swap of a committed download (a new machine over other data memory, handed the
 /// old one's RETAIN values and forces).
