@@ -194,6 +194,27 @@ pub enum Request<'a> {
     },
 }
 
+impl Request<'_> {
+    /// The table, first address and quantity of the objects the request reads or writes.
+    pub fn objects(&self) -> (Table, u16, u16) {
+        match *self {
+            Request::Read {
+                table,
+                start,
+                quantity,
+            } => (table, start, quantity),
+            Request::WriteCoil { address, .. } => (Table::Coils, address, 1),
+            Request::WriteRegister { address, .. } => (Table::HoldingRegisters, address, 1),
+            Request::WriteCoils {
+                start, quantity, ..
+            } => (Table::Coils, start, quantity),
+            Request::WriteRegisters {
+                start, quantity, ..
+            } => (Table::HoldingRegisters, start, quantity),
+        }
+    }
+}
+
 /// Decodes a request PDU (function code and data).
 pub fn decode_request(pdu: &[u8]) -> Result<Request<'_>, Exception> {
     let Some((&function, data)) = pdu.split_first() else {
@@ -394,17 +415,11 @@ fn bytes_of(bits: bool, first: u32, count: u16) -> core::ops::Range<usize> {
 /// (the soft-PLC: its program's variables) carries these bytes over after a write that
 /// [`respond`] carried out (its response is no exception).
 pub fn written(pdu: &[u8]) -> Option<(Area, core::ops::Range<usize>)> {
-    let (table, start, quantity) = match decode_request(pdu).ok()? {
-        Request::Read { .. } => return None,
-        Request::WriteCoil { address, .. } => (Table::Coils, address, 1),
-        Request::WriteRegister { address, .. } => (Table::HoldingRegisters, address, 1),
-        Request::WriteCoils {
-            start, quantity, ..
-        } => (Table::Coils, start, quantity),
-        Request::WriteRegisters {
-            start, quantity, ..
-        } => (Table::HoldingRegisters, start, quantity),
-    };
+    let request = decode_request(pdu).ok()?;
+    if matches!(request, Request::Read { .. }) {
+        return None;
+    }
+    let (table, start, quantity) = request.objects();
     let place = place(table, start, quantity)?;
     Some((place.area, bytes_of(table.is_bits(), place.first, quantity)))
 }
@@ -416,21 +431,7 @@ fn execute(
     image: &mut impl ProcessImage,
     out: &mut [u8],
 ) -> Result<usize, Exception> {
-    let (table, start, quantity) = match request {
-        Request::Read {
-            table,
-            start,
-            quantity,
-        } => (table, start, quantity),
-        Request::WriteCoil { address, .. } => (Table::Coils, address, 1),
-        Request::WriteRegister { address, .. } => (Table::HoldingRegisters, address, 1),
-        Request::WriteCoils {
-            start, quantity, ..
-        } => (Table::Coils, start, quantity),
-        Request::WriteRegisters {
-            start, quantity, ..
-        } => (Table::HoldingRegisters, start, quantity),
-    };
+    let (table, start, quantity) = request.objects();
     let place = place(table, start, quantity).ok_or(Exception::IllegalDataAddress)?;
     let bits = table.is_bits();
     span(image.area(place.area), bits, place.first, quantity)
