@@ -64,8 +64,16 @@ fn significant(x: f64) -> f64 {
     if x == 0.0 || !x.is_finite() {
         return x;
     }
-    let scale = 10f64.powi(2 - x.abs().log10().floor() as i32);
-    (x * scale).round() / scale
+    let digits = 2 - x.abs().log10().floor() as i32;
+    // Dividing by a power of ten above one, not multiplying by its inexact inverse, keeps
+    // a large count whole (1.3e7, not 12999999.999999998).
+    if digits >= 0 {
+        let scale = 10f64.powi(digits);
+        (x * scale).round() / scale
+    } else {
+        let scale = 10f64.powi(-digits);
+        (x / scale).round() * scale
+    }
 }
 
 /// Parses the `bench ...` part of a line (anything before `bench ` is ignored, so kernel-log
@@ -291,6 +299,11 @@ mod tests {
         assert_eq!(percentile(&samples, 99.0), 990.0);
         assert_eq!(percentile(&[1234.5], 99.0), 1230.0);
         assert!(percentile(&[], 99.0).is_nan());
+        // Large counts stay whole; small values keep three places.
+        assert_eq!(significant(12_999_999.9), 13_000_000.0);
+        assert_eq!(significant(7_153_210.0), 7_150_000.0);
+        assert_eq!(significant(0.012345), 0.0123);
+        assert_eq!(significant(-2_345.0), -2_350.0);
     }
 
     #[test]

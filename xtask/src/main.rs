@@ -131,11 +131,14 @@ enum Cmd {
         /// target/bench/iec61499.json.
         #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native", "plc", "schedules", "net", "ports", "kernel", "disk"])]
         iec61499: bool,
-        /// Run only the multicore scaling benchmark (not part of the full bench, about 6
+        /// Run only the multicore scaling benchmark (not part of the full bench, about 11
         /// minutes; always real time): N soft-PLC partitions on N CPUs, N = 1 to 4, each
         /// running tests/configs/plc/scaling.st freewheeling; their executions in 60 s
         /// (`scaling_executions_<n>cpu` per partition, `scaling_total_<n>cpu`) and the
-        /// speedup over one CPU (`scaling_speedup_<n>cpu`); writes target/bench/scaling.json.
+        /// speedup over one CPU (`scaling_speedup_<n>cpu`); then N IEC 61499 devices
+        /// running the event chains of tests/configs/iec61499/scaling.fboot one after
+        /// another (`iec61499_scaling_chains_<n>cpu`, `_total_`, `_speedup_`); writes
+        /// target/bench/scaling.json.
         #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native", "plc", "schedules", "net", "ports", "kernel", "disk", "deterministic_time", "iec61499"])]
         scaling: bool,
         /// Run only the guest's multicore benchmark (not part of the full bench, about 3
