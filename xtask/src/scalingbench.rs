@@ -11,12 +11,13 @@
 //!   control process prints, gives the count.
 //! - **IEC 61499** (`tests/configs/iec61499/scaling.fboot`): one resource whose event
 //!   chain is the IEC 61499 benchmark's loop (an E_CTU `C` and an E_SWITCH `SW` counting
-//!   to 20 and back, 44 events) followed by the E_DELAY `D` (DT = 0) that starts the next
-//!   chain, counted by the E_CTUs `N` (chains, to 1000) and `M` (thousands). The device
-//!   process runs the chains one after another (a resource's timers fire at their own
-//!   instants, so D's are all due at once: at most 10,000 chains a pass, about a quarter
-//!   of a second, then the process looks at its clock and prints its watches each
-//!   second). The count is 1000·M + N from the watch lines 5 s and 65 s after the first.
+//!   to 20 and back) followed by the E_DELAY `D` (DT = 0) that starts the next chain, 45
+//!   events in all, counted by the E_CTUs `N` (chains, to 1000) and `M` (thousands). The
+//!   device process runs the chains one after another (a resource's timers fire at their
+//!   own instants, so D's are all due at once: at most 10,000 chains a pass, a tenth to a
+//!   quarter of a second, then the process looks at its clock and prints its watches
+//!   each second). The count is 1000·M + N from the watch lines 5 s and 65 s after the
+//!   first.
 //!   The resources of one device share the device (one chain at a time, under the device
 //!   mutex; `partitions/iec61499/partition/src/main.rs`), so the IEC 61499 runtime scales
 //!   by devices: one partition with its resource on each CPU.
