@@ -27,6 +27,22 @@ const fn multicore_bound_ns(attacked_cpus: u64) -> u64 {
     QUIET_NS + attacked_cpus * KERNEL_PATH_NS + TURN_NS
 }
 
+/// The bound for a system whose partitions all run on CPU 0: [`LATENESS_BOUND_NS`] on a
+/// machine of one CPU; on a machine of several (the suite's default: two), where QEMU
+/// runs the CPUs in turns, one turn more ([`multicore_bound_ns`] with the victim's CPU
+/// attacked): the other CPUs, idle, still follow the frame's boundaries (a CPU that sees
+/// another's boundary pass interrupts it, which catches up under the kernel lock), and
+/// the victim's CPU waiting for the lock or for an answer waits for the other's turn.
+/// (Seen once in CI on two CPUs: 54.7 us in `attack_root_paths`, whose worst on one CPU
+/// is 17.5 us.)
+fn one_cpu_bound(o: &xtask::qemu::Outcome) -> u64 {
+    if o.line("cpu 1 online").is_some() {
+        multicore_bound_ns(1)
+    } else {
+        LATENESS_BOUND_NS
+    }
+}
+
 /// `victim: windows=N missed=M drift=D late_ns max=X mean=Y last=Z` → (N, M, D, X).
 fn victim_summary(line: &str) -> Option<(u64, u64, u64, u64)> {
     let field = |name: &str| {
@@ -69,7 +85,7 @@ fn syscall_fuzz() {
             >= 30,
         "the histogram misses calls",
     );
-    victim_kept_its_windows(&o, 1_000, LATENESS_BOUND_NS);
+    victim_kept_its_windows(&o, 1_000, one_cpu_bound(&o));
 }
 
 /// syscall_fuzz with a fuzzer on each of two CPUs: the kernel's lock and cross-CPU paths
@@ -240,7 +256,7 @@ fn attack_floods() {
                 .all(|l| !l.contains("syssw: partition victim-200: IDLE")),
         "IDLE with words naming the victim did not stop the forger alone",
     );
-    victim_kept_its_windows(&o, 200, LATENESS_BOUND_NS);
+    victim_kept_its_windows(&o, 200, one_cpu_bound(&o));
 }
 
 #[test]
@@ -262,7 +278,7 @@ fn attack_map() {
             && o.line("flood-map: a call failed").is_none(),
         "the attacker did not map, protect and unmap the most pages a call takes",
     );
-    victim_kept_its_windows(&o, 200, LATENESS_BOUND_NS);
+    victim_kept_its_windows(&o, 200, one_cpu_bound(&o));
 }
 
 #[test]
@@ -324,7 +340,7 @@ fn attack_partitions() {
         restarts >= 900,
         &format!("{restarts} restarts of fault-loop in 1,000 frames"),
     );
-    victim_kept_its_windows(&o, 1_000, LATENESS_BOUND_NS);
+    victim_kept_its_windows(&o, 1_000, one_cpu_bound(&o));
 }
 
 #[test]
@@ -341,7 +357,7 @@ fn attack_io() {
         o.line("flood-io: 100 rounds of 61440 ports").is_some() && o.line(" failed: ").is_none(),
         "the attacker did not grant its whole port range again and again",
     );
-    victim_kept_its_windows(&o, 200, LATENESS_BOUND_NS);
+    victim_kept_its_windows(&o, 200, one_cpu_bound(&o));
 }
 
 #[test]
@@ -361,7 +377,7 @@ fn attack_kill() {
             && o.line(" failed: ").is_none(),
         "the attacker did not kill a task with its whole thread quota and 760 page tables again and again",
     );
-    victim_kept_its_windows(&o, 200, LATENESS_BOUND_NS);
+    victim_kept_its_windows(&o, 200, one_cpu_bound(&o));
 }
 
 #[test]
@@ -380,7 +396,7 @@ fn attack_root_paths() {
             && o.line(" failed: ").is_none(),
         "the root task did not make each longest call again and again",
     );
-    victim_kept_its_windows(&o, 200, LATENESS_BOUND_NS);
+    victim_kept_its_windows(&o, 200, one_cpu_bound(&o));
 }
 
 #[test]
@@ -468,7 +484,7 @@ fn attack_reach() {
         }),
         "a health monitor line for a spinner or the IPC flood",
     );
-    victim_kept_its_windows(&o, 300, LATENESS_BOUND_NS);
+    victim_kept_its_windows(&o, 300, one_cpu_bound(&o));
 }
 
 #[test]
@@ -496,7 +512,7 @@ fn attack_restart() {
                 .is_some(),
         &format!("{restarts} restarts of kill-loop with its whole tree"),
     );
-    victim_kept_its_windows(&o, 200, LATENESS_BOUND_NS);
+    victim_kept_its_windows(&o, 200, one_cpu_bound(&o));
 }
 
 #[test]
@@ -535,7 +551,7 @@ fn attack_late_faults() {
         restarts >= 250,
         &format!("{restarts} restarts of late-restart in 300 frames"),
     );
-    victim_kept_its_windows(&o, 300, LATENESS_BOUND_NS);
+    victim_kept_its_windows(&o, 300, one_cpu_bound(&o));
 }
 
 /// A victim alone on CPU 0 keeps its windows within the bound for one attacked CPU while
