@@ -14,6 +14,10 @@ pub const RINGS_SIZE: usize = 4096;
 /// Descriptor flags.
 pub const DESC_NEXT: u16 = 1;
 pub const DESC_WRITE: u16 = 2;
+/// The driver ring's flag asking the device not to interrupt when it puts a buffer in
+/// the used ring (VIRTQ_AVAIL_F_NO_INTERRUPT: without the event index a hint the device
+/// may ignore, which QEMU follows).
+pub const AVAIL_NO_INTERRUPT: u16 = 1;
 
 /// Where a queue lives in the DMA region (byte offsets) and how big it is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -196,6 +200,16 @@ impl Queue {
         self.given |= ids;
         self.chains[usize::from(head.id)] = ids;
         true
+    }
+
+    /// Asks the device to interrupt, or not, when it puts a buffer of this queue in the
+    /// used ring (a hint: the driver still finds the used buffers on its own, see
+    /// [`AVAIL_NO_INTERRUPT`]).
+    pub fn set_interrupts(&self, mem: &mut impl Memory, on: bool) {
+        let (_, avail, _) = self.rings();
+        mem.store16(avail, if on { 0 } else { AVAIL_NO_INTERRUPT });
+        // Before the device may look again (the caller's next look at the used ring).
+        mem.fence();
     }
 
     /// The next entry the device has put in the used ring, if any.

@@ -104,6 +104,12 @@ impl DeviceModel {
         }
     }
 
+    /// Whether the driver wants an interrupt for a used buffer (no
+    /// [`crate::queue::AVAIL_NO_INTERRUPT`]).
+    pub fn wants_interrupts(&self, mem: &Ram) -> bool {
+        mem.load16(self.avail) & crate::queue::AVAIL_NO_INTERRUPT == 0
+    }
+
     /// Puts `id` (with `len` bytes written) in the used ring.
     pub fn complete(&mut self, mem: &mut Ram, id: u32, len: u32) {
         let slot = usize::from(self.used_idx % self.size);

@@ -123,6 +123,22 @@ fn queue_sizes_are_powers_of_two_within_the_limits() {
 }
 
 #[test]
+fn interrupts_are_asked_for_or_not_without_touching_the_requests() {
+    let (mut mem, mut q, mut dev) = setup(8, 512);
+    assert!(dev.wants_interrupts(&mem), "a new queue interrupts");
+    q.set_interrupts(&mut mem, false);
+    assert!(q.give(&mut mem, 2, 100, false));
+    assert!(!dev.wants_interrupts(&mem));
+    assert_eq!(dev.next(&mem).map(|d| (d.id, d.len)), Some((2, 100)));
+    dev.complete(&mut mem, 2, 0);
+    assert_eq!(q.take(&mem), Some(Used::Buffer { id: 2, len: 0 }));
+    q.set_interrupts(&mut mem, true);
+    assert!(dev.wants_interrupts(&mem));
+    assert!(q.give(&mut mem, 2, 50, false));
+    assert_eq!(dev.next(&mem).map(|d| (d.id, d.len)), Some((2, 50)));
+}
+
+#[test]
 fn a_chain_is_linked_in_order_and_comes_back_whole() {
     let (mut mem, mut q, mut dev) = setup(8, 512);
     let request = [

@@ -4,7 +4,8 @@
 //!
 //! The driver keeps it simple: one descriptor per frame (the 12-byte virtio-net header
 //! and the frame in one buffer, which VIRTIO_F_VERSION_1 allows), descriptor `i` always
-//! bound to buffer `i`, no offloads, no event index, INTx interrupts.
+//! bound to buffer `i`, no offloads, no event index, INTx interrupts (the transmit queue's
+//! only while it is full: the NIC partition takes sent buffers back on its next pass).
 
 use ::virtio::queue::{QueueLayout, RINGS_SIZE, queue_size};
 pub use ::virtio::{

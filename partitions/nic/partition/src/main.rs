@@ -15,9 +15,10 @@
 //! round-robin, at most [`BUDGET`] a tenant and round, and only while the transmit queue has room, so a
 //! tenant that floods its port only fills its own port and loses its own frames (its
 //! sends fail when the port is full) while every other tenant keeps its turn. A tenant's
-//! frame with another source MAC is dropped. Then it waits for the device's interrupt, a
-//! tenant's doorbell (syssw notifies it when a tenant's frames or wake-ups arrive) or a
-//! tenant's notification that a frame went into its empty ring, at most [`POLL`].
+//! frame with another source MAC is dropped. Then it waits for the device's interrupt (for
+//! received frames; for sent ones only while the transmit queue is full), a tenant's
+//! doorbell (syssw notifies it when a tenant's frames or wake-ups arrive) or a tenant's
+//! notification that a frame went into its empty ring, at most [`POLL`].
 //!
 //! Log lines (on the serial log as `[<partition>] nic: ...`; an interface):
 //! - `nic: virtio-net <BB:DD.F> MAC <mac>, <n> descriptors a queue, line <irq>, <k> tenant(s)`
@@ -186,6 +187,8 @@ struct Nic {
     counts: Counts,
     /// The transmit queue got frames since it was last rung.
     tx_pending: bool,
+    /// Whether the transmit queue asks the device for interrupts.
+    tx_interrupts: bool,
 }
 
 impl Nic {
@@ -257,6 +260,25 @@ impl Nic {
                 Some(Used::Buffer { .. }) => {}
             }
         }
+    }
+
+    /// The device interrupts for the frames it sent only while the transmit queue is full
+    /// (tenants' frames wait for room); otherwise their buffers are taken back on the next
+    /// pass, so a frame sent costs no interrupt, and no pass, of its own. `true` when
+    /// buffers came back as the interrupt was asked for (the device used them before):
+    /// another pass is due at once.
+    fn ask_transmit_interrupts(&mut self) -> bool {
+        let full = self.net.tx.free().is_none();
+        if full == self.tx_interrupts {
+            return false;
+        }
+        self.tx_interrupts = full;
+        self.net.tx.set_interrupts(&mut self.net.mem, full);
+        if !full {
+            return false;
+        }
+        self.reclaim();
+        self.net.tx.free().is_some()
     }
 
     /// Frames from the tenants' ports or rings, round-robin within their budgets, while
@@ -420,7 +442,9 @@ extern "C" fn run() {
         links,
         counts: Counts { bogus: 0, runts: 0 },
         tx_pending: false,
+        tx_interrupts: false,
     };
+    nic.net.tx.set_interrupts(&mut nic.net.mem, false);
     let mut frame = [0u8; MESSAGE];
     let start = sys::clock();
     let mut next_log = STATS_EVERY_MS;
@@ -431,6 +455,9 @@ extern "C" fn run() {
         nic.serve_tenants(&mut rounds, &mut frame);
         if core::mem::take(&mut nic.tx_pending) {
             nic.net.kick(TRANSMIT_QUEUE);
+        }
+        if nic.ask_transmit_interrupts() {
+            continue;
         }
         let now_ms = (sys::clock() - start) / 1_000_000;
         if now_ms >= next_log {
