@@ -1155,19 +1155,23 @@ impl Stack {
     }
 
     /// Runs both interfaces at `now_us`: frames in and out, timers, retransmissions; then
-    /// frees lingering connections that have finished.
-    pub fn poll(&mut self, now_us: i64) {
+    /// frees lingering connections that have finished. Returns whether a socket may have
+    /// changed (frames came or went, a timer fired): otherwise no call waiting for one
+    /// can have become ready.
+    pub fn poll(&mut self, now_us: i64) -> bool {
         let now = Instant::from_micros(now_us);
         self.now = self.now.max(now);
         let now = self.now;
-        // Loopback frames may need several rounds (SYN, SYN-ACK, ACK).
+        use smoltcp::iface::PollResult::SocketStateChanged as Changed;
+        // One poll of eth takes in every frame its device holds and sends what the
+        // sockets answer; the loopback's frames go round (what one poll sends, the next
+        // takes in: SYN, SYN-ACK, ACK), so it runs until it is quiet.
+        let mut changed = self.eth.poll(now, &mut self.device, &mut self.eth_set) == Changed;
         for _ in 0..8 {
-            let a = self.lo.poll(now, &mut self.loopback, &mut self.lo_set);
-            let b = self.eth.poll(now, &mut self.device, &mut self.eth_set);
-            use smoltcp::iface::PollResult::None as Quiet;
-            if a == Quiet && b == Quiet {
+            if self.lo.poll(now, &mut self.loopback, &mut self.lo_set) != Changed {
                 break;
             }
+            changed = true;
         }
         let lingering = core::mem::take(&mut self.lingering);
         for (side, handle) in lingering {
@@ -1177,6 +1181,7 @@ impl Stack {
                 self.lingering.push((side, handle));
             }
         }
+        changed
     }
 
     /// When the stack must be polled next (microseconds), if it has a timer.

@@ -175,6 +175,37 @@ fn tcp_connect_accept_transfer_close() {
     assert_eq!(net.a.send(c, b"x", None), Err(Error::BadDescriptor));
 }
 
+/// `poll` says when a socket may have changed (frames came or went), and a poll with
+/// nothing to do says it did nothing: the guest serves the calls waiting for sockets
+/// again only after the former.
+#[test]
+fn a_poll_says_whether_a_socket_may_have_changed() {
+    let mut net = Net::new();
+    let l = listener(&mut net.b, 80, 4);
+    let c = tcp(&mut net.a);
+    net.now += 1_000;
+    assert!(!net.b.poll(net.now), "a listener alone");
+    assert_eq!(
+        net.a.connect(c, SocketAddr::new(PEER, 80)),
+        Err(Error::WouldBlock)
+    );
+    // The SYN went out in connect's own poll; it reaches the listener.
+    let syn = net.a.device.take().expect("the SYN");
+    net.b.device.deliver(&syn);
+    assert!(net.b.poll(net.now), "a SYN came, a SYN-ACK went");
+    assert!(!net.b.poll(net.now), "nothing new");
+    net.run(5);
+    let (s, _) = net.b.accept(l).unwrap();
+    assert_eq!(net.a.send(c, b"ping", None), Ok(4));
+    assert!(net.a.poll(net.now), "data went");
+    let segment = net.a.device.take().expect("the data");
+    net.b.device.deliver(&segment);
+    assert!(net.b.poll(net.now), "data came");
+    assert!(net.b.readiness(s).unwrap().readable);
+    net.run(5);
+    assert!(!net.a.poll(net.now) && !net.b.poll(net.now));
+}
+
 #[test]
 fn refused_and_nonblocking_connects() {
     let mut net = Net::new();
