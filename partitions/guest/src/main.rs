@@ -432,13 +432,16 @@ fn main(start: u64, _: u64) {
         }
         if bell == Some(received.sender) && tag.label() == doorbell::LABEL_RUNG {
             // Messages came to a port (eth0's wake-ups are drained, the calls waiting for
-            // a port served), or only frames to eth0's ring: it is read on every run.
-            if received.message.words[0] & doorbell::PORT_BIT != 0 {
-                system.net.messages_came();
-            }
+            // a port served), or only frames to eth0's ring.
             host.sched.outside();
-            host.port_waiting = false; // the calls served again say it anew
-            if let Some(ended) = system.tick(&mut fs, &mut host) {
+            let ended = if received.message.words[0] & doorbell::PORT_BIT != 0 {
+                system.net.messages_came();
+                host.port_waiting = false; // the calls served again say it anew
+                system.tick(&mut fs, &mut host)
+            } else {
+                system.frames_came(&mut fs, &mut host)
+            };
+            if let Some(ended) = ended {
                 break ended;
             }
             continue;

@@ -287,12 +287,10 @@ impl Net {
 
     /// Runs the stack at the host's time: `eth0`'s received frames in from the `rx`
     /// port (or ring), timers, then the frames to send out to the `tx` port (or ring).
-    pub fn run(&mut self, host: &mut impl crate::syscall::Host) {
+    /// Returns whether a socket may have changed ([`Stack::poll`]).
+    pub fn run(&mut self, host: &mut impl crate::syscall::Host) -> bool {
         let Some((rx, tx)) = self.link else {
-            if self.stack.is_some() {
-                self.poll(host.now_ns());
-            }
-            return;
+            return self.stack.is_some() && self.poll(host.now_ns());
         };
         let now = host.now_ns();
         if self.ring.is_some() {
@@ -314,7 +312,7 @@ impl Net {
             }
             self.rx_busy = got > 0;
         }
-        self.poll(now);
+        let changed = self.poll(now) || self.rx_busy;
         let mut dropped = 0;
         let stack = self.stack(now);
         while let Some(out) = stack.device.take() {
@@ -323,6 +321,7 @@ impl Net {
             }
         }
         self.tx_dropped += dropped;
+        changed
     }
 
     /// [`Net::run`] with a frame ring: a look at it costs no call to syssw, so it is
@@ -330,7 +329,13 @@ impl Net {
     /// read: one that comes after is left for the next run) when the doorbell rang, and
     /// the NIC partition is woken when a frame goes into an empty ring: notified as the
     /// ring names it, else through `tx`.
-    fn run_ring(&mut self, host: &mut impl crate::syscall::Host, now: u64, rx: usize, tx: usize) {
+    fn run_ring(
+        &mut self,
+        host: &mut impl crate::syscall::Host,
+        now: u64,
+        rx: usize,
+        tx: usize,
+    ) -> bool {
         if core::mem::take(&mut self.rx_busy) {
             let mut kick = [0u8; 1];
             for _ in 0..LIMITS.frames {
@@ -341,23 +346,27 @@ impl Net {
             self.rx_looked_ns = now;
         }
         let mut frame = [0u8; frame_ring::MTU];
+        let mut took = false;
         for _ in 0..LIMITS.frames {
             let Some((_, from)) = self.ring.as_mut() else {
-                return;
+                return false;
             };
             match from.pop(&mut frame) {
                 None => break,
-                Some(Ok(len)) => self.stack(now).device.deliver(&frame[..len]),
+                Some(Ok(len)) => {
+                    self.stack(now).device.deliver(&frame[..len]);
+                    took = true;
+                }
                 Some(Err(_)) => self.rx_bad += 1,
             }
         }
-        self.poll(now);
+        let changed = self.poll(now) || took;
         let (mut dropped, mut kick) = (0, false);
         let Some(stack) = self.stack.as_mut() else {
-            return;
+            return changed;
         };
         let Some((to, _)) = self.ring.as_mut() else {
-            return;
+            return changed;
         };
         while let Some(out) = stack.device.take() {
             match to.push(&out) {
@@ -374,6 +383,7 @@ impl Net {
             let _ = host.port_send(tx, &[0]);
         }
         self.tx_dropped += dropped;
+        changed
     }
 
     /// The stack at `now_ns` (made on first use).
@@ -486,12 +496,13 @@ impl Net {
         self.refs.iter().filter(|&&r| r > 0).count()
     }
 
-    /// Runs the stack at `now_ns`: frames in and out, timers.
-    pub fn poll(&mut self, now_ns: u64) {
+    /// Runs the stack at `now_ns`: frames in and out, timers. Returns whether a socket
+    /// may have changed ([`Stack::poll`]).
+    pub fn poll(&mut self, now_ns: u64) -> bool {
         self.polled_ns = now_ns;
-        if let Some(stack) = self.stack.as_mut() {
-            stack.poll((now_ns / 1000) as i64);
-        }
+        self.stack
+            .as_mut()
+            .is_some_and(|stack| stack.poll((now_ns / 1000) as i64))
     }
 
     /// When the stack must run next (the guest's clock, ns): never sooner than

@@ -418,6 +418,16 @@ impl System {
         self.wake(fs, k)
     }
 
+    /// Frames came to `eth0`: the stack takes them in, and the kept messages are served
+    /// again only if it took any or a socket may have changed (a wake-up for frames an
+    /// earlier run already took changes nothing). Returns how init ended when it did.
+    pub fn frames_came(&mut self, fs: &mut Fs, k: &mut impl Tasks) -> Option<Outcome> {
+        if !self.net.run(k) {
+            return None;
+        }
+        self.wake(fs, k)
+    }
+
     /// Whether a process waits in a call (a kept message).
     pub fn any_blocked(&self) -> bool {
         self.slots

@@ -1807,6 +1807,34 @@ fn only_what_may_end_a_wait_serves_the_blocked_calls_again() {
     }
 }
 
+/// A wake-up for `eth0`'s frames serves the blocked calls again only when the stack took
+/// frames in or a socket may have changed: one for frames an earlier run already took
+/// serves none (each retry is a whole call), while a tick still serves them all.
+#[test]
+fn frames_that_changed_nothing_serve_no_blocked_call_again() {
+    let bytes = initramfs();
+    let mut g = Guest::new(&bytes);
+    let child = g.fork(1);
+    let status = SCRATCH + 0x100;
+    assert_eq!(g.call(1, nr::wait4, [u64::MAX, status, 0, 0, 0, 0]), None);
+    // A listener on the loopback: the stack exists, with nothing to do.
+    let addr = SCRATCH + 0x200;
+    g.put(
+        child,
+        addr,
+        &[2, 0, 0x1f, 0x90, 127, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0, 0],
+    );
+    let l = g.call(child, nr::socket, [2, 1, 0, 0, 0, 0]).unwrap();
+    assert_eq!(g.call(child, nr::bind, [l, addr, 16, 0, 0, 0]), Some(0));
+    assert_eq!(g.call(child, nr::listen, [l, 2, 0, 0, 0, 0]), Some(0));
+    g.host.selected.clear();
+    assert_eq!(g.system.frames_came(&mut g.fs, &mut g.host), None);
+    assert_eq!(g.host.selected, [], "init's wait4 stays as it was");
+    assert_eq!(g.system.tick(&mut g.fs, &mut g.host), None);
+    assert_eq!(g.host.selected, [1], "a tick serves it again");
+    assert!(matches!(g.system.state(1), Some(State::Blocked(_))));
+}
+
 #[test]
 fn fork_copies_the_process_and_wait_reaps_it() {
     let bytes = initramfs();
