@@ -234,16 +234,9 @@ pub(crate) fn boot_real_time(
 /// `Err` with what is missing.
 fn plc_executions(lines: &[String], partition: &str) -> Result<f64, String> {
     let tag = format!("[{partition}] plc: t=");
-    let key = format!("{PLC_COUNT}=");
     let last = lines.iter().rev().find_map(|l| {
-        let rest = &l[l.find(&tag)? + tag.len()..];
-        let ms: u64 = rest.split("ms").next()?.parse().ok()?;
-        let count: u64 = rest
-            .split_whitespace()
-            .find_map(|w| w.strip_prefix(key.as_str()))?
-            .parse()
-            .ok()?;
-        Some((ms, count))
+        let (ms, words) = timed_line(l, &tag)?;
+        Some((ms, word_value(words, PLC_COUNT)?))
     });
     let end = WARM_UP_MS + MEASURED_MS + 1_000;
     match last {
@@ -266,15 +259,11 @@ fn iec61499_chains(lines: &[String], partition: &str) -> Result<f64, String> {
     let counts: Vec<(u64, u64)> = lines
         .iter()
         .filter_map(|l| {
-            let rest = &l[l.find(&tag)? + tag.len()..];
-            let ms: u64 = rest.split("ms").next()?.parse().ok()?;
-            let value = |key: &str| -> Option<u64> {
-                rest.split_whitespace()
-                    .find_map(|w| w.strip_prefix(key)?.strip_prefix('='))?
-                    .parse()
-                    .ok()
-            };
-            Some((ms, 1000 * value(THOUSANDS)? + value(CHAINS)?))
+            let (ms, words) = timed_line(l, &tag)?;
+            Some((
+                ms,
+                1000 * word_value(words, THOUSANDS)? + word_value(words, CHAINS)?,
+            ))
         })
         .collect();
     let Some(&(first, _)) = counts.first() else {
@@ -295,6 +284,21 @@ fn iec61499_chains(lines: &[String], partition: &str) -> Result<f64, String> {
             WARM_UP_MS / 1000
         )),
     }
+}
+
+/// The time (ms) and the rest of a status line `...<tag><ms>ms <words>`, if `line` is one.
+fn timed_line<'l>(line: &'l str, tag: &str) -> Option<(u64, &'l str)> {
+    let rest = &line[line.find(tag)? + tag.len()..];
+    Some((rest.split("ms").next()?.parse().ok()?, rest))
+}
+
+/// The number of word `<key>=<n>` among `words`.
+fn word_value(words: &str, key: &str) -> Option<u64> {
+    words
+        .split_whitespace()
+        .find_map(|w| w.strip_prefix(key)?.strip_prefix('='))?
+        .parse()
+        .ok()
 }
 
 #[cfg(test)]

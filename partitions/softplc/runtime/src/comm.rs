@@ -176,9 +176,10 @@ pub fn serve_modbus(
         let len = match split_frame(&slot.bytes[..slot.len.min(SLOT_BYTES)]) {
             Ok(Frame::Complete { header, pdu, .. }) => {
                 let len = respond(&server, header, pdu, areas, &mut out);
-                // A response without the exception bit: a write was carried out.
-                if len > 7
-                    && out[7] & 0x80 == 0
+                // A response without the exception bit (the function code's high bit,
+                // right after the MBAP header): a write was carried out.
+                if len > plc_modbus::MBAP_LEN
+                    && out[plc_modbus::MBAP_LEN] & 0x80 == 0
                     && let Some((area, bytes)) = plc_modbus::written(pdu)
                 {
                     wrote(area, bytes, areas);
