@@ -230,8 +230,9 @@ pub fn command(
     deterministic_time: bool,
     com2: &Com2,
     work_dir: &Path,
+    held: Option<&HeldCpu>,
 ) -> Command {
-    let mut cmd = match deterministic_time.then(held_cpu).flatten() {
+    let mut cmd = match held.map(|h| h.cpu) {
         Some(cpu) => {
             let mut cmd = Command::new(TASKSET);
             cmd.arg("-c").arg(cpu.to_string()).arg(&qemu.binary);
@@ -306,20 +307,45 @@ pub fn command(
 /// util-linux's `taskset`, which starts a program held to some of the host's CPUs.
 const TASKSET: &str = "/usr/bin/taskset";
 
-/// The host CPU a run on deterministic time is held to, if `taskset` is there: this
-/// process's CPUs in turn, so that the two scenarios run at a time get different ones.
-/// On deterministic time QEMU runs the guest's CPUs in turns on one thread, and every
-/// idle stretch of the guest is a hand-off between that thread and QEMU's main loop (the
-/// main loop moves the virtual clock to the next timer); where waking a thread on another
-/// host CPU is slow (a host that is itself a virtual machine), those hand-offs set the
-/// pace: the default system's virtual time ran at 0.08 of real time with QEMU's threads
-/// on two CPUs, 0.47 with them held to one.
-fn held_cpu() -> Option<usize> {
-    static NEXT: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
-    let cpus = std::thread::available_parallelism().ok()?.get();
-    Path::new(TASKSET)
-        .is_file()
-        .then(|| NEXT.fetch_add(1, Ordering::Relaxed) % cpus)
+/// Runs held to each of this process's CPUs now (index: the CPU).
+static HELD: Mutex<Vec<usize>> = Mutex::new(Vec::new());
+
+/// The host CPU a run on deterministic time is held to while this lives: the one the
+/// fewest runs of this process are held to now, so that the two scenarios run at a time
+/// get different ones. On deterministic time QEMU runs the guest's CPUs in turns on one
+/// thread, and every idle stretch of the guest is a hand-off between that thread and
+/// QEMU's main loop (the main loop moves the virtual clock to the next timer); where
+/// waking a thread on another host CPU is slow (a host that is itself a virtual machine),
+/// those hand-offs set the pace: the default system's virtual time ran at 0.08 of real
+/// time with QEMU's threads on two CPUs, 0.47 with them held to one.
+pub struct HeldCpu {
+    cpu: usize,
+}
+
+impl HeldCpu {
+    /// The least-held CPU, if `taskset` is there.
+    fn take() -> Option<HeldCpu> {
+        let cpus = std::thread::available_parallelism().ok()?.get();
+        if !Path::new(TASKSET).is_file() {
+            return None;
+        }
+        let mut held = HELD.lock().unwrap_or_else(|e| e.into_inner());
+        if held.len() < cpus {
+            held.resize(cpus, 0);
+        }
+        let cpu = (0..cpus).min_by_key(|&c| held[c])?;
+        held[cpu] += 1;
+        Some(HeldCpu { cpu })
+    }
+}
+
+impl Drop for HeldCpu {
+    fn drop(&mut self) {
+        let mut held = HELD.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(n) = held.get_mut(self.cpu) {
+            *n = n.saturating_sub(1);
+        }
+    }
 }
 
 /// The `-smp` value of a run: the larger of `WARDEN_SMP` (`warden_smp`) and the CPUs the
@@ -591,6 +617,8 @@ fn launch(
     if terminal {
         std::fs::write(&com1_log, "")?;
     }
+    // Held until QEMU has ended (this function waits for it).
+    let held = options.deterministic_time.then(HeldCpu::take).flatten();
     let mut cmd = command(
         qemu,
         media,
@@ -598,6 +626,7 @@ fn launch(
         options.deterministic_time,
         &options.com2,
         &options.work_dir,
+        held.as_ref(),
     );
     cmd.args(&options.extra_args);
     // QEMU runs the CPUs in turns on one host thread on deterministic time and with a
@@ -786,6 +815,26 @@ fn spawn_line_reader(stdout: std::process::ChildStdout, tx: mpsc::Sender<String>
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Runs held at once go to different CPUs while there are free ones, and a CPU is
+    /// free again when its run ends.
+    #[test]
+    fn runs_held_at_once_get_the_least_held_cpus() {
+        let cpus = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let Some(first) = HeldCpu::take() else {
+            return; // no taskset: runs are not held
+        };
+        let second = HeldCpu::take().unwrap();
+        if cpus >= 2 {
+            assert_ne!(first.cpu, second.cpu);
+        }
+        let freed = first.cpu;
+        drop(first);
+        let third = HeldCpu::take().unwrap();
+        if cpus == 2 {
+            assert_eq!(third.cpu, freed, "the CPU its run left");
+        }
+    }
 
     #[test]
     fn a_power_cut_kills_qemu_its_delay_after_its_line() {
