@@ -505,6 +505,13 @@ impl Net {
             .is_some_and(|stack| stack.poll((now_ns / 1000) as i64))
     }
 
+    /// The sockets (by id) the stack's runs changed since the last take
+    /// ([`Stack::take_changed`]).
+    pub fn take_changed(&mut self) -> Vec<usize> {
+        let changed = self.stack.as_mut().map(Stack::take_changed);
+        changed.into_iter().flatten().map(|id| id.0).collect()
+    }
+
     /// When the stack must run next (the guest's clock, ns): never sooner than
     /// [`MIN_POLL_GAP_NS`] after it last ran (a stack that wants to run at once, e.g.
     /// with frames the ports have no room for yet, must not keep the guest from serving

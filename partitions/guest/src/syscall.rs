@@ -329,6 +329,54 @@ pub fn touches_only_caller(m: &ExceptionMessage) -> bool {
     }
 }
 
+/// What a waiting call waits for, as far as the guest's network goes: after the stack's
+/// sockets alone changed, [`crate::system`] serves again only the calls that may have
+/// become able to finish.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Waits {
+    /// A call on one socket of the stack (its id): a read, write, send, receive, accept
+    /// or connect of it.
+    Socket(usize),
+    /// Not on the stack: a child, a futex, a sleep, a signal, or a descriptor that is no
+    /// socket of the stack (a pipe, the terminal, an `AF_UNIX` pair).
+    Elsewhere,
+    /// Possibly on any socket (`poll`, `select`, `epoll_wait`), or a call not known here.
+    Anything,
+}
+
+/// What the call in `m` of process `p` waits for when it cannot finish.
+pub fn waits_on(p: &Process, m: &ExceptionMessage) -> Waits {
+    use linux::nr;
+    if m.vector != VECTOR_SYSCALL {
+        return Waits::Anything;
+    }
+    match m.registers.rax {
+        nr::read
+        | nr::readv
+        | nr::write
+        | nr::writev
+        | nr::recvfrom
+        | nr::sendto
+        | nr::recvmsg
+        | nr::sendmsg
+        | nr::accept
+        | nr::accept4
+        | nr::connect => match p.file(m.registers.rdi) {
+            Some(crate::process::File::Socket(id)) => Waits::Socket(id),
+            _ => Waits::Elsewhere,
+        },
+        nr::wait4
+        | nr::waitid
+        | nr::nanosleep
+        | nr::clock_nanosleep
+        | nr::futex
+        | nr::pause
+        | nr::rt_sigsuspend
+        | nr::rt_sigtimedwait => Waits::Elsewhere,
+        _ => Waits::Anything,
+    }
+}
+
 /// A call the guest does not serve: `ENOSYS`, logged, with its Linux name, the first time
 /// a process of the guest makes it.
 fn unsupported(p: &Process, reported: &mut Reported, host: &mut impl Host, number: u64) -> Errno {

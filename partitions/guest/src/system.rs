@@ -13,7 +13,11 @@
 //! order of events decides nothing but who runs first. Not after a message that changed
 //! only its sender, which runs on (a page fault; a call of
 //! [`crate::syscall::table::CALLER_ONLY`]: `getpid`, `mmap`, `rt_sigaction`, `stat`, ...):
-//! that ends nobody's wait.
+//! that ends nobody's wait. And only some after a change of the network's sockets alone
+//! ([`Woken::Sockets`]: frames came, or a call on one socket whose caller runs on or
+//! waits): the calls waiting on those sockets, and those that may watch any socket
+//! (`poll`, `select`, ...), not a `wait4`, a pipe's `read` or an `accept` of a socket
+//! nothing happened to ([`crate::syscall::waits_on`]).
 //!
 //! **Fork.** The child is a new task sharing the parent's pages copy-on-write (the
 //! partition program maps them; [`Tasks::fork`]) and a thread started at address 0:
@@ -147,6 +151,37 @@ pub enum State {
     Vforked { child: u32, reply: ExceptionMessage },
     /// It ended and its parent has not reaped it: its wait status.
     Zombie(u32),
+}
+
+/// Why the kept messages of blocked processes are served again.
+#[derive(Debug)]
+enum Woken {
+    /// Anything may have changed: every one is.
+    Anything,
+    /// Only these sockets of the stack changed (by id; the stack's runs add the ones they
+    /// change): only the calls waiting on them, or possibly on any socket, are.
+    Sockets(Vec<usize>),
+}
+
+impl Woken {
+    /// Whether a call that waits for `waits` is served again.
+    fn serves(&self, waits: syscall::Waits) -> bool {
+        match (self, waits) {
+            (Woken::Anything, _) => true,
+            (Woken::Sockets(ids), syscall::Waits::Socket(id)) => ids.contains(&id),
+            (Woken::Sockets(ids), syscall::Waits::Anything) => !ids.is_empty(),
+            (Woken::Sockets(_), syscall::Waits::Elsewhere) => false,
+        }
+    }
+
+    /// Adds what `other` says changed.
+    fn add(&mut self, other: Woken) {
+        match (self, other) {
+            (Woken::Anything, _) => {}
+            (this, Woken::Anything) => *this = Woken::Anything,
+            (Woken::Sockets(ids), Woken::Sockets(more)) => ids.extend(more),
+        }
+    }
 }
 
 /// A process and its state, displayed as [`System::describe`] says.
@@ -385,6 +420,10 @@ impl System {
         self.lend(i);
         let slot = self.slots[i].as_mut()?;
         let only_caller = matches!(slot.state, State::Running) && syscall::touches_only_caller(&m);
+        let waits = match slot.state {
+            State::Running => syscall::waits_on(&slot.process, &m),
+            _ => syscall::Waits::Anything,
+        };
         let ended = match slot.state {
             State::Starting(registers) => {
                 slot.state = State::Running;
@@ -409,23 +448,44 @@ impl System {
         if ended.is_none() && only_caller && self.slots.get(i).is_some_and(runs_on) {
             return None;
         }
-        ended.or_else(|| self.wake(fs, k))
+        if ended.is_some() {
+            return ended;
+        }
+        let woken = self.changed_by(i, pid, waits);
+        self.wake(fs, k, woken)
+    }
+
+    /// What a call of process `pid` in slot `i` that waited for `waits` changed, now that
+    /// it was served: a call on one socket whose caller runs on or waits changed that
+    /// socket only (a read made room, a write queued bytes, an accept took a
+    /// connection); any other call, or a caller that stopped or ended, anything.
+    fn changed_by(&self, i: usize, pid: u32, waits: syscall::Waits) -> Woken {
+        let caller_goes_on = self.slots.get(i).is_some_and(|slot| {
+            matches!(slot, Some(s) if s.process.pid == pid
+                && !s.stopped
+                && matches!(s.state, State::Running | State::Blocked(_)))
+        });
+        match waits {
+            syscall::Waits::Socket(id) if caller_goes_on => Woken::Sockets(alloc::vec![id]),
+            _ => Woken::Anything,
+        }
     }
 
     /// Serves the kept messages of blocked processes again, after something outside the
     /// processes happened (console input arrived). Returns how init ended when it did.
     pub fn retry_blocked(&mut self, fs: &mut Fs, k: &mut impl Tasks) -> Option<Outcome> {
-        self.wake(fs, k)
+        self.wake(fs, k, Woken::Anything)
     }
 
-    /// Frames came to `eth0`: the stack takes them in, and the kept messages are served
-    /// again only if it took any or a socket may have changed (a wake-up for frames an
-    /// earlier run already took changes nothing). Returns how init ended when it did.
+    /// Frames came to `eth0`: the stack takes them in, and the kept messages waiting on
+    /// the sockets they changed are served again (none when it took no frame and no socket
+    /// may have changed: a wake-up for frames an earlier run already took changes
+    /// nothing). Returns how init ended when it did.
     pub fn frames_came(&mut self, fs: &mut Fs, k: &mut impl Tasks) -> Option<Outcome> {
         if !self.net.run(k) {
             return None;
         }
-        self.wake(fs, k)
+        self.wake(fs, k, Woken::Sockets(Vec::new()))
     }
 
     /// Whether a process waits in a call (a kept message).
@@ -479,15 +539,21 @@ impl System {
                 return Some(ended);
             }
         }
-        self.wake(fs, k)
+        self.wake(fs, k, Woken::Anything)
     }
 
     /// Serves the kept messages of blocked processes until none completes; a blocked
     /// process with a signal to act on is interrupted instead.
-    fn wake(&mut self, fs: &mut Fs, k: &mut impl Tasks) -> Option<Outcome> {
+    fn wake(&mut self, fs: &mut Fs, k: &mut impl Tasks, mut woken: Woken) -> Option<Outcome> {
         loop {
             // Frames and timers first: what the calls just sent reaches its sockets.
             self.net.run(k);
+            let changed = self.net.take_changed();
+            if let Woken::Sockets(ids) = &mut woken {
+                ids.extend(changed);
+            }
+            // What the calls served now change, for the next round.
+            let mut next = Woken::Sockets(Vec::new());
             let mut progress = false;
             for i in 0..self.slots.len() {
                 let Some(Slot {
@@ -501,8 +567,12 @@ impl System {
                 let Some(slot) = self.slots[i].as_mut() else {
                     continue;
                 };
+                let waits = syscall::waits_on(&slot.process, &m);
+                if !woken.serves(waits) {
+                    continue;
+                }
                 slot.state = State::Running;
-                let tgid = slot.process.tgid;
+                let (pid, tgid) = (slot.process.pid, slot.process.tgid);
                 self.lend(i);
                 let ended = match self.interrupting(i) {
                     Some(restart) => {
@@ -519,17 +589,22 @@ impl System {
                 if ended.is_some() {
                     return ended;
                 }
-                progress |= !matches!(
+                let finished = !matches!(
                     self.slots[i],
                     Some(Slot {
                         state: State::Blocked(_),
                         ..
                     })
                 );
+                if finished {
+                    progress = true;
+                    next.add(self.changed_by(i, pid, waits));
+                }
             }
             if !progress {
                 return None;
             }
+            woken = next;
         }
     }
 

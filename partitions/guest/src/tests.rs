@@ -1835,6 +1835,62 @@ fn frames_that_changed_nothing_serve_no_blocked_call_again() {
     assert!(matches!(g.system.state(1), Some(State::Blocked(_))));
 }
 
+/// After a change of the stack's sockets alone, only the calls waiting on a socket that
+/// changed are served again: a datagram to one socket answers its reader's `recvfrom`,
+/// while another socket's reader and init's `wait4` stay as they were until a tick.
+#[test]
+fn a_socket_change_serves_only_the_calls_waiting_on_that_socket() {
+    let bytes = initramfs();
+    let mut g = Guest::new(&bytes);
+    let (reader, other, sender) = (g.fork(1), g.fork(1), g.fork(1));
+    let status = SCRATCH + 0x100;
+    assert_eq!(g.call(1, nr::wait4, [u64::MAX, status, 0, 0, 0, 0]), None);
+    let bound = |g: &mut Guest, pid: u32, port: u16| {
+        let addr = SCRATCH + 0x200;
+        let [hi, lo] = port.to_be_bytes();
+        g.put(
+            pid,
+            addr,
+            &[2, 0, hi, lo, 127, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0, 0],
+        );
+        let u = g.call(pid, nr::socket, [2, 2, 0, 0, 0, 0]).unwrap();
+        assert_eq!(g.call(pid, nr::bind, [u, addr, 16, 0, 0, 0]), Some(0));
+        u
+    };
+    let mine = bound(&mut g, reader, 7001);
+    let theirs = bound(&mut g, other, 7002);
+    let buf = SCRATCH + 0x400;
+    assert_eq!(g.call(reader, nr::recvfrom, [mine, buf, 64, 0, 0, 0]), None);
+    assert_eq!(
+        g.call(other, nr::recvfrom, [theirs, buf, 64, 0, 0, 0]),
+        None
+    );
+    let out = bound(&mut g, sender, 7003);
+    g.put(
+        sender,
+        SCRATCH + 0x300,
+        &[2, 0, 0x1b, 0x59, 127, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0, 0],
+    );
+    g.put(sender, buf, b"ping");
+    g.host.selected.clear();
+    let sendto = [out, buf, 4, 0, SCRATCH + 0x300, 16];
+    assert_eq!(g.call(sender, nr::sendto, sendto), Some(4));
+    assert!(
+        g.host.selected.contains(&reader),
+        "the datagram's reader is served"
+    );
+    assert!(
+        !g.host.selected.contains(&other),
+        "the other socket's reader is not"
+    );
+    assert!(!g.host.selected.contains(&1), "nor init's wait4");
+    assert_eq!(g.system.state(reader), Some(State::Running));
+    g.host.selected.clear();
+    assert_eq!(g.system.tick(&mut g.fs, &mut g.host), None);
+    assert!(g.host.selected.contains(&other) && g.host.selected.contains(&1));
+    assert!(matches!(g.system.state(other), Some(State::Blocked(_))));
+}
+
 #[test]
 fn fork_copies_the_process_and_wait_reaps_it() {
     let bytes = initramfs();

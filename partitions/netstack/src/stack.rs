@@ -189,6 +189,8 @@ pub struct Stack {
     table: Vec<Option<Sock>>,
     /// Closed TCP connections finishing in the background.
     lingering: Vec<(Side, SocketHandle)>,
+    /// The sockets a poll changed since [`Stack::take_changed`] last took them.
+    changed: Vec<SocketId>,
     next_port: u16,
     now: Instant,
 }
@@ -229,6 +231,7 @@ impl Stack {
             lo_set: SocketSet::new(Vec::new()),
             table: Vec::new(),
             lingering: Vec::new(),
+            changed: Vec::new(),
             next_port: *EPHEMERAL.start(),
             now,
         }
@@ -1157,11 +1160,12 @@ impl Stack {
     /// Runs both interfaces at `now_us`: frames in and out, timers, retransmissions; then
     /// frees lingering connections that have finished. Returns whether a socket may have
     /// changed (frames came or went, a timer fired): otherwise no call waiting for one
-    /// can have become ready.
+    /// can have become ready. Which sockets changed, [`Stack::take_changed`] tells.
     pub fn poll(&mut self, now_us: i64) -> bool {
         let now = Instant::from_micros(now_us);
         self.now = self.now.max(now);
         let now = self.now;
+        let before: Vec<Option<u64>> = (0..self.table.len()).map(|i| self.digest(i)).collect();
         use smoltcp::iface::PollResult::SocketStateChanged as Changed;
         // One poll of eth takes in every frame its device holds and sends what the
         // sockets answer; the loopback's frames go round (what one poll sends, the next
@@ -1173,6 +1177,14 @@ impl Stack {
             }
             changed = true;
         }
+        if changed {
+            for (i, digest) in before.into_iter().enumerate() {
+                let id = SocketId(i);
+                if digest.is_some() && self.digest(i) != digest && !self.changed.contains(&id) {
+                    self.changed.push(id);
+                }
+            }
+        }
         let lingering = core::mem::take(&mut self.lingering);
         for (side, handle) in lingering {
             if self.tcp(side, handle).state() == tcp::State::Closed {
@@ -1182,6 +1194,66 @@ impl Stack {
             }
         }
         changed
+    }
+
+    /// The sockets the polls changed since the last take, in no order: a call waiting on
+    /// another socket cannot have become able to finish through them (what the calls
+    /// themselves change, their callers know).
+    pub fn take_changed(&mut self) -> Vec<SocketId> {
+        core::mem::take(&mut self.changed)
+    }
+
+    /// A digest of what the calls on the socket at `index` can see of it, if it is open:
+    /// its state and each of its smoltcp sockets' state and queues. A poll that leaves it
+    /// as it was cannot have made a call waiting on the socket able to finish. (Each
+    /// value is folded in by a bijection, so a poll that changes one of them always
+    /// changes the digest.)
+    fn digest(&self, index: usize) -> Option<u64> {
+        let sock = self.table.get(index)?.as_ref()?;
+        let fold = |digest: u64, value: u64| (digest ^ value).wrapping_mul(0x0000_0100_0000_01b3);
+        let set = |side| match side {
+            Side::Eth => &self.eth_set,
+            Side::Lo => &self.lo_set,
+        };
+        let tcp = |digest: u64, (side, handle): (Side, SocketHandle)| {
+            let s = set(side).get::<tcp::Socket>(handle);
+            [
+                s.state() as u64,
+                s.recv_queue() as u64,
+                s.send_queue() as u64,
+            ]
+            .into_iter()
+            .fold(digest, fold)
+        };
+        let flags = u64::from(sock.shut_read) | u64::from(sock.shut_write) << 1;
+        let digest = fold(
+            0xcbf2_9ce4_8422_2325,
+            flags | u64::from(sock.error.is_some()) << 2,
+        );
+        Some(match &sock.tcp {
+            TcpState::Listening { listeners, .. } => listeners.iter().copied().fold(digest, tcp),
+            TcpState::Connecting { side, handle, .. } => tcp(fold(digest, 1), (*side, *handle)),
+            TcpState::Connected {
+                side,
+                handle,
+                peer_closed,
+            } => tcp(
+                fold(digest, 2 | u64::from(*peer_closed) << 8),
+                (*side, *handle),
+            ),
+            TcpState::Fresh | TcpState::Failed(_) => {
+                sock.udp.iter().fold(digest, |d, &(side, h)| {
+                    let s = set(side).get::<udp::Socket>(h);
+                    [
+                        s.recv_queue() as u64,
+                        s.send_queue() as u64,
+                        u64::from(s.can_recv()) | u64::from(s.can_send()) << 1,
+                    ]
+                    .into_iter()
+                    .fold(d, fold)
+                })
+            }
+        })
     }
 
     /// When the stack must be polled next (microseconds), if it has a timer.

@@ -207,6 +207,51 @@ fn a_poll_says_whether_a_socket_may_have_changed() {
 }
 
 #[test]
+fn a_poll_names_the_sockets_it_changed() {
+    let mut net = Net::new();
+    let l = listener(&mut net.b, 80, 4);
+    let idle = listener(&mut net.b, 81, 4);
+    let u = net.b.socket(AF_INET, SOCK_DGRAM, 0).unwrap();
+    net.b
+        .bind(u, SocketAddr::new(Ipv4Address::UNSPECIFIED, 5353))
+        .unwrap();
+    let c = tcp(&mut net.a);
+    assert_eq!(
+        net.a.connect(c, SocketAddr::new(PEER, 80)),
+        Err(Error::WouldBlock)
+    );
+    net.run(5);
+    assert_eq!(
+        net.b.take_changed(),
+        vec![l],
+        "a connection came to the listener"
+    );
+    assert_eq!(net.b.take_changed(), vec![], "taken");
+    let (s, _) = net.b.accept(l).unwrap();
+    assert_eq!(net.a.send(c, b"ping", None), Ok(4));
+    net.run(5);
+    assert_eq!(
+        net.b.take_changed(),
+        vec![s],
+        "data came to the accepted socket only"
+    );
+    let datagram = net.a.socket(AF_INET, SOCK_DGRAM, 0).unwrap();
+    assert_eq!(
+        net.a.send(datagram, b"", Some(SocketAddr::new(PEER, 5353))),
+        Ok(0)
+    );
+    net.run(5);
+    assert_eq!(
+        net.b.take_changed(),
+        vec![u],
+        "an empty datagram is news too"
+    );
+    net.run(5);
+    assert_eq!(net.b.take_changed(), vec![], "nothing new");
+    assert_eq!(net.b.accept(idle).err(), Some(Error::WouldBlock));
+}
+
+#[test]
 fn refused_and_nonblocking_connects() {
     let mut net = Net::new();
     let c = tcp(&mut net.a);
