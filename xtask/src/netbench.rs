@@ -317,10 +317,13 @@ fn leg(name: &str, boot: impl FnOnce([u16; 2]) -> Result<Outcome>) -> Result<Vec
     for line in last_nic_counters(&outcome.lines) {
         eprintln!("xtask: {name}: {line}");
     }
-    // The processes the guest's init left behind: one still waiting shows where.
-    for line in outcome.lines.iter().filter(|l| l.contains("guest: left: ")) {
-        let at = line.find("guest: left: ").unwrap_or(0);
-        eprintln!("xtask: {name}: {}", &line[at..]);
+    // The processes the guest's init left behind (one still waiting shows where), and
+    // how often waiting calls were served again.
+    for at in ["guest: left: ", "guest: waiting calls served again: "] {
+        for line in outcome.lines.iter().filter(|l| l.contains(at)) {
+            let from = line.find(at).unwrap_or(0);
+            eprintln!("xtask: {name}: {}", &line[from..]);
+        }
     }
     match measured {
         Ok(metrics) => {

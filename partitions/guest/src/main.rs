@@ -462,6 +462,10 @@ fn main(start: u64, _: u64) {
     host.flush();
     let left = system.pids().filter(|&pid| pid != INIT_PID).count();
     println!("guest: init ended with {left} other processes left");
+    println!(
+        "guest: waiting calls served again: {} ({} finished)",
+        system.served_again, system.finished_again
+    );
     for pid in system
         .pids()
         .filter(|&pid| pid != INIT_PID)

@@ -314,6 +314,10 @@ pub struct System {
     lent: Option<(usize, usize)>,
     /// `fork`s refused with `EAGAIN` so far (the first are logged).
     refusals: u32,
+    /// Kept messages served again so far, and how many of them finished (the rest waited
+    /// on: a retry for nothing, each a whole call).
+    pub served_again: u64,
+    pub finished_again: u64,
 }
 
 /// How many refused `fork`s [`System`] logs.
@@ -341,6 +345,8 @@ impl System {
             hwcap,
             lent: None,
             refusals: 0,
+            served_again: 0,
+            finished_again: 0,
         }
     }
 
@@ -573,6 +579,7 @@ impl System {
                 }
                 slot.state = State::Running;
                 let (pid, tgid) = (slot.process.pid, slot.process.tgid);
+                self.served_again += 1;
                 self.lend(i);
                 let ended = match self.interrupting(i) {
                     Some(restart) => {
@@ -597,6 +604,7 @@ impl System {
                     })
                 );
                 if finished {
+                    self.finished_again += 1;
                     progress = true;
                     next.add(self.changed_by(i, pid, waits));
                 }
