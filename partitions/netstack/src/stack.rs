@@ -1177,6 +1177,19 @@ impl Stack {
             }
             changed = true;
         }
+        // A connect's time-out is the stack's own timer, which no frame shows: it fails
+        // here, so that a call waiting on it learns of it.
+        for i in 0..self.table.len() {
+            if let Some(Sock {
+                tcp: TcpState::Connecting { since, .. },
+                ..
+            }) = self.table[i]
+                && now - since >= CONNECT_TIMEOUT
+            {
+                self.update(SocketId(i));
+                changed = true;
+            }
+        }
         if changed {
             for (i, digest) in before.into_iter().enumerate() {
                 let id = SocketId(i);

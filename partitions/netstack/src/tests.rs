@@ -249,6 +249,18 @@ fn a_poll_names_the_sockets_it_changed() {
     net.run(5);
     assert_eq!(net.b.take_changed(), vec![], "nothing new");
     assert_eq!(net.b.accept(idle).err(), Some(Error::WouldBlock));
+    // A connect nobody answers fails when its time is up: a change too.
+    let lost = tcp(&mut net.a);
+    assert_eq!(
+        net.a.connect(lost, SocketAddr::new(PEER, 80)),
+        Err(Error::WouldBlock)
+    );
+    let _ = net.a.take_changed();
+    net.a.poll(net.now + 74_000_000);
+    assert_eq!(net.a.take_changed(), vec![]);
+    assert!(net.a.poll(net.now + 76_000_000));
+    assert_eq!(net.a.take_changed(), vec![lost]);
+    assert_eq!(net.a.connect_result(lost), Err(Error::TimedOut));
 }
 
 #[test]
