@@ -389,8 +389,9 @@ fn main(start: u64, _: u64) {
         // a busy guest must not starve its timers), or the policy's next decision.
         let timeout = match system.next_timer() {
             Some(at) if at <= now => {
-                host.port_waiting = false; // the calls served again say it anew
-                if let Some(ended) = system.tick(&mut fs, &mut host) {
+                // The calls served again say anew whether they wait for a port.
+                let ports = core::mem::take(&mut host.port_waiting);
+                if let Some(ended) = system.tick(&mut fs, &mut host, ports) {
                     break ended;
                 }
                 continue;
@@ -412,8 +413,8 @@ fn main(start: u64, _: u64) {
         let received = match host.receive(timeout) {
             Ok(r) => r,
             Err(user_rt::abi::syscall::Error::TimedOut) => {
-                host.port_waiting = false; // the calls served again say it anew
-                if let Some(ended) = system.tick(&mut fs, &mut host) {
+                let ports = core::mem::take(&mut host.port_waiting);
+                if let Some(ended) = system.tick(&mut fs, &mut host, ports) {
                     break ended;
                 }
                 continue;
@@ -437,7 +438,7 @@ fn main(start: u64, _: u64) {
             let ended = if received.message.words[0] & doorbell::PORT_BIT != 0 {
                 system.net.messages_came();
                 host.port_waiting = false; // the calls served again say it anew
-                system.tick(&mut fs, &mut host)
+                system.tick(&mut fs, &mut host, true)
             } else {
                 system.frames_came(&mut fs, &mut host)
             };

@@ -14,10 +14,10 @@
 //! only its sender, which runs on (a page fault; a call of
 //! [`crate::syscall::table::CALLER_ONLY`]: `getpid`, `mmap`, `rt_sigaction`, `stat`, ...):
 //! that ends nobody's wait. And only some after a change of the network's sockets alone
-//! ([`Woken::Sockets`]: frames came, or a call on one socket whose caller runs on or
-//! waits): the calls waiting on those sockets, and those that may watch any socket
-//! (`poll`, `select`, ...), not a `wait4`, a pipe's `read` or an `accept` of a socket
-//! nothing happened to ([`crate::syscall::waits_on`]).
+//! ([`Woken::Sockets`]: frames came, a timer of the stack alone was due, or a call on
+//! one socket whose caller runs on or waits): the calls waiting on those sockets, and
+//! those that may watch any socket (`poll`, `select`, ...), not a `wait4`, a pipe's
+//! `read` or an `accept` of a socket nothing happened to ([`crate::syscall::waits_on`]).
 //!
 //! **Fork.** The child is a new task sharing the parent's pages copy-on-write (the
 //! partition program maps them; [`Tasks::fork`]) and a thread started at address 0:
@@ -528,9 +528,13 @@ impl System {
     }
 
     /// Raises the alarms that are due and completes the sleeps that ended (called when the
-    /// time [`System::next_timer`] named has come).
-    pub fn tick(&mut self, fs: &mut Fs, k: &mut impl Tasks) -> Option<Outcome> {
+    /// time [`System::next_timer`] named has come, or the partition's ports had news:
+    /// `ports`, the calls waiting for a port are served again too). When only the stack's
+    /// timers were due (a retransmission, a delayed ACK), only the calls waiting on the
+    /// sockets its run changed are served again ([`Woken::Sockets`]).
+    pub fn tick(&mut self, fs: &mut Fs, k: &mut impl Tasks, ports: bool) -> Option<Outcome> {
         let now = k.now_ns();
+        let mut processes_due = ports || self.events.next_expiry().is_some_and(|at| at <= now);
         // Expired timers are counted now, so that none stays due (the calls served
         // again below read them).
         self.events.advance_timers(now);
@@ -541,11 +545,20 @@ impl System {
                 }
                 _ => false,
             };
+            processes_due |= due;
             if due && let Some(ended) = self.send(j, None, Info::kernel(signal::SIGALRM), fs, k) {
                 return Some(ended);
             }
         }
-        self.wake(fs, k, Woken::Anything)
+        processes_due |= self.slots.iter().flatten().any(|s| {
+            matches!(s.state, State::Blocked(_)) && s.process.wake_at.is_some_and(|at| at <= now)
+        });
+        let woken = if processes_due {
+            Woken::Anything
+        } else {
+            Woken::Sockets(Vec::new())
+        };
+        self.wake(fs, k, woken)
     }
 
     /// Serves the kept messages of blocked processes until none completes; a blocked

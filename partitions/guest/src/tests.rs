@@ -1809,7 +1809,8 @@ fn only_what_may_end_a_wait_serves_the_blocked_calls_again() {
 
 /// A wake-up for `eth0`'s frames serves the blocked calls again only when the stack took
 /// frames in or a socket may have changed: one for frames an earlier run already took
-/// serves none (each retry is a whole call), while a tick still serves them all.
+/// serves none (each retry is a whole call), nor does a tick for the stack's timers
+/// alone, while one for the ports' news serves them all.
 #[test]
 fn frames_that_changed_nothing_serve_no_blocked_call_again() {
     let bytes = initramfs();
@@ -1830,14 +1831,25 @@ fn frames_that_changed_nothing_serve_no_blocked_call_again() {
     g.host.selected.clear();
     assert_eq!(g.system.frames_came(&mut g.fs, &mut g.host), None);
     assert_eq!(g.host.selected, [], "init's wait4 stays as it was");
-    assert_eq!(g.system.tick(&mut g.fs, &mut g.host), None);
-    assert_eq!(g.host.selected, [1], "a tick serves it again");
+    assert_eq!(g.system.tick(&mut g.fs, &mut g.host, false), None);
+    assert_eq!(
+        g.host.selected,
+        [],
+        "so on a tick with no timer of a process due"
+    );
+    assert_eq!(g.system.tick(&mut g.fs, &mut g.host, true), None);
+    assert_eq!(
+        g.host.selected,
+        [1],
+        "a tick for the ports' news serves it again"
+    );
     assert!(matches!(g.system.state(1), Some(State::Blocked(_))));
 }
 
 /// After a change of the stack's sockets alone, only the calls waiting on a socket that
 /// changed are served again: a datagram to one socket answers its reader's `recvfrom`,
-/// while another socket's reader and init's `wait4` stay as they were until a tick.
+/// while another socket's reader and init's `wait4` stay as they were until a timer of a
+/// process is due.
 #[test]
 fn a_socket_change_serves_only_the_calls_waiting_on_that_socket() {
     let bytes = initramfs();
@@ -1886,8 +1898,24 @@ fn a_socket_change_serves_only_the_calls_waiting_on_that_socket() {
     assert!(!g.host.selected.contains(&1), "nor init's wait4");
     assert_eq!(g.system.state(reader), Some(State::Running));
     g.host.selected.clear();
-    assert_eq!(g.system.tick(&mut g.fs, &mut g.host), None);
-    assert!(g.host.selected.contains(&other) && g.host.selected.contains(&1));
+    assert_eq!(g.system.tick(&mut g.fs, &mut g.host, false), None);
+    assert_eq!(g.host.selected, [], "a tick with no timer of a process due");
+    // A sleep's end is a process's timer: every waiting call is served again.
+    let sleep = SCRATCH + 0x500;
+    g.put(sender, sleep, &100u64.to_le_bytes());
+    g.put(sender, sleep + 8, &[0; 8]);
+    let nanosleep = on_stack(nr::nanosleep, [sleep, 0, 0, 0, 0, 0]);
+    assert!(g.serve(sender, nanosleep).is_empty());
+    g.host.now += 100_000_000_000;
+    assert_eq!(g.system.tick(&mut g.fs, &mut g.host, false), None);
+    for pid in [sender, other, 1] {
+        assert!(g.host.selected.contains(&pid), "{pid} served again");
+    }
+    assert_eq!(
+        g.system.state(sender),
+        Some(State::Running),
+        "its sleep ended"
+    );
     assert!(matches!(g.system.state(other), Some(State::Blocked(_))));
 }
 
@@ -2137,7 +2165,7 @@ fn event_descriptors_wake_waiters_are_shared_by_fork_and_go_with_their_last_desc
     let due = g.system.next_timer().expect("the timer wakes the guest");
     g.host.now = due;
     g.host.resumed.clear();
-    assert_eq!(g.system.tick(&mut g.fs, &mut g.host), None);
+    assert_eq!(g.system.tick(&mut g.fs, &mut g.host, false), None);
     assert!(
         g.host
             .resumed
@@ -2661,7 +2689,7 @@ fn sleeps_end_when_their_time_comes_or_with_eintr() {
     let due = g.system.next_timer().unwrap();
     assert!(due > 0);
     g.host.resumed.clear();
-    assert_eq!(g.system.tick(&mut g.fs, &mut g.host), None);
+    assert_eq!(g.system.tick(&mut g.fs, &mut g.host, false), None);
     assert_eq!(g.host.resumed.len(), 1, "slept long enough");
     assert_eq!(g.host.resumed[0].1.registers.rax, 0);
     // An alarm interrupts a sleep: SIGALRM ends the process by default.
@@ -2675,7 +2703,7 @@ fn sleeps_end_when_their_time_comes_or_with_eintr() {
         g.serve(child, on_stack(nr::nanosleep, [SCRATCH, 0, 0, 0, 0, 0]))
             .is_empty()
     );
-    assert_eq!(g.system.tick(&mut g.fs, &mut g.host), None);
+    assert_eq!(g.system.tick(&mut g.fs, &mut g.host, false), None);
     assert_eq!(g.system.state(child), Some(State::Zombie(SIGALRM)));
     // Bad times are EINVAL.
     g.put(
@@ -2824,7 +2852,7 @@ fn poll_and_select_wait_for_a_pipe_or_their_timeout() {
     );
     g.host.resumed.clear();
     for _ in 0..10 {
-        assert_eq!(g.system.tick(&mut g.fs, &mut g.host), None);
+        assert_eq!(g.system.tick(&mut g.fs, &mut g.host, false), None);
     }
     assert_eq!(g.host.resumed.len(), 1);
     assert_eq!(g.host.resumed[0].1.registers.rax, 0);
@@ -2886,7 +2914,7 @@ fn identity_resources_and_futex_of_a_single_threaded_root_process() {
     );
     g.host.resumed.clear();
     for _ in 0..10 {
-        assert_eq!(g.system.tick(&mut g.fs, &mut g.host), None);
+        assert_eq!(g.system.tick(&mut g.fs, &mut g.host, false), None);
     }
     assert_eq!(g.host.resumed[0].1.registers.rax, err(Errno::ETIMEDOUT));
 }
@@ -4498,7 +4526,7 @@ fn threads_are_placed_on_the_guests_cpus() {
         g.serve(c, on_stack(nr::nanosleep, [SCRATCH, 0, 0, 0, 0, 0]))
             .is_empty()
     );
-    assert_eq!(g.system.tick(&mut g.fs, &mut g.host), None);
+    assert_eq!(g.system.tick(&mut g.fs, &mut g.host, false), None);
     assert_eq!(
         g.host.moves.last(),
         Some(&(c, 2)),
