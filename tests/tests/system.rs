@@ -429,6 +429,8 @@ fn system_default() {
         "`exit` did not restart the guest",
     );
     // The PLC kept cycling (real time on a shared host: its timing is not asserted here).
+    // After the host held the PLC's statistics back for seconds, the lines of the seconds
+    // missed come one after the other, two of them within one cycle (the same count).
     let cycles: Vec<u64> = o
         .lines
         .iter()
@@ -437,7 +439,9 @@ fn system_default() {
         .collect();
     check(
         &o,
-        cycles.len() >= 5 && cycles.windows(2).all(|w| w[1] > w[0]),
+        cycles.len() >= 5
+            && cycles.windows(2).all(|w| w[1] >= w[0])
+            && cycles.first() < cycles.last(),
         &format!("the PLC's cycle counts {cycles:?}"),
     );
     // The loop closed: the level reached the setpoint band with the PLC's setpoint there.
