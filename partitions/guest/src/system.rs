@@ -461,6 +461,23 @@ impl System {
         self.wake(fs, k, woken)
     }
 
+    /// What the kept call `m` of slot `i` waits for ([`syscall::waits_on`]), read in its
+    /// process's descriptor table: a thread's is its first thread's while none of its
+    /// calls is served ([`System::lend`]).
+    fn waits_of(&self, i: usize, m: &ExceptionMessage) -> syscall::Waits {
+        let Some(slot) = self.slots[i].as_ref() else {
+            return syscall::Waits::Anything;
+        };
+        let lent_to_it = self.lent.is_some_and(|(_, to)| to == i);
+        let table = match self.index(slot.process.tgid) {
+            Some(first) if slot.process.is_thread() && !lent_to_it => self.slots[first].as_ref(),
+            _ => Some(slot),
+        };
+        table.map_or(syscall::Waits::Anything, |s| {
+            syscall::waits_on(&s.process, m)
+        })
+    }
+
     /// What a call of process `pid` in slot `i` that waited for `waits` changed, now that
     /// it was served: a call on one socket whose caller runs on or waits changed that
     /// socket only (a read made room, a write queued bytes, an accept took a
@@ -583,13 +600,13 @@ impl System {
                 else {
                     continue;
                 };
-                let Some(slot) = self.slots[i].as_mut() else {
-                    continue;
-                };
-                let waits = syscall::waits_on(&slot.process, &m);
+                let waits = self.waits_of(i, &m);
                 if !woken.serves(waits) {
                     continue;
                 }
+                let Some(slot) = self.slots[i].as_mut() else {
+                    continue;
+                };
                 slot.state = State::Running;
                 let (pid, tgid) = (slot.process.pid, slot.process.tgid);
                 self.served_again += 1;

@@ -1919,6 +1919,42 @@ fn a_socket_change_serves_only_the_calls_waiting_on_that_socket() {
     assert!(matches!(g.system.state(other), Some(State::Blocked(_))));
 }
 
+/// A thread waiting on a socket is served again when the socket changes: what it waits
+/// on is read in its process's descriptor table (the first thread's).
+#[test]
+fn a_thread_waiting_on_a_socket_is_served_when_it_changes() {
+    let bytes = initramfs();
+    let mut g = Guest::new(&bytes);
+    let flags = 0x3d0f00; // pthread_create's clone
+    let tid = g.call(
+        1,
+        nr::clone,
+        [flags, SCRATCH + 0x800, SCRATCH + 0x10, SCRATCH + 0x14, 0, 0],
+    );
+    let thread = u32::try_from(tid.unwrap()).unwrap();
+    let _ = g
+        .system
+        .serve(thread, &mut g.fs, &mut g.host, ExceptionMessage::default());
+    let addr = SCRATCH + 0x200;
+    g.put(
+        thread,
+        addr,
+        &[2, 0, 0x1b, 0x59, 127, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0, 0],
+    );
+    let u = g.call(thread, nr::socket, [2, 2, 0, 0, 0, 0]).unwrap();
+    assert_eq!(g.call(thread, nr::bind, [u, addr, 16, 0, 0, 0]), Some(0));
+    let buf = SCRATCH + 0x400;
+    assert_eq!(g.call(thread, nr::recvfrom, [u, buf, 64, 0, 0, 0]), None);
+    let out = g.call(1, nr::socket, [2, 2, 0, 0, 0, 0]).unwrap();
+    g.put(1, buf, b"ping");
+    assert_eq!(g.call(1, nr::sendto, [out, buf, 4, 0, addr, 16]), Some(4));
+    assert_eq!(
+        g.system.state(thread),
+        Some(State::Running),
+        "its recvfrom finished"
+    );
+}
+
 #[test]
 fn fork_copies_the_process_and_wait_reaps_it() {
     let bytes = initramfs();
