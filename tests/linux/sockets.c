@@ -4,8 +4,9 @@
  * send/recv, sendto/recvfrom, sendmsg/recvmsg, a 256 KiB transfer between two processes,
  * shutdown, getsockname/getpeername, setsockopt/getsockopt, O_NONBLOCK's EAGAIN, poll and
  * select, sendfile from a file, fstat, and the errors of calls on the wrong socket or on
- * no socket at all; a connected AF_UNIX stream pair (socketpair) both ways, across a fork,
- * shut down and closed. Ports are the ones bind picks, so that it runs beside anything. */
+ * no socket at all; a thread waiting in a read of a socket until another thread's peer
+ * writes; a connected AF_UNIX stream pair (socketpair) both ways, across a fork, shut down
+ * and closed. Ports are the ones bind picks, so that it runs beside anything. */
 #include "check.h"
 
 #include <arpa/inet.h>
@@ -13,6 +14,7 @@
 #include <netinet/in.h>
 #include <netinet/tcp.h>
 #include <poll.h>
+#include <pthread.h>
 #include <signal.h>
 #include <stdlib.h>
 #include <sys/select.h>
@@ -475,6 +477,45 @@ static void socket_pair(void)
 	check_errno("socketpair AF_INET EOPNOTSUPP", socketpair(AF_INET, SOCK_STREAM, 0, sv), EOPNOTSUPP);
 }
 
+static int waiting_listener;
+
+static void *accept_and_read(void *unused)
+{
+	(void)unused;
+	char buf[8];
+	int fd = accept(waiting_listener, NULL, NULL);
+	long got = fd < 0 ? -1 : read(fd, buf, sizeof buf);
+	if (got > 0 && write(fd, buf, got) != got)
+		got = -1;
+	if (fd >= 0)
+		close(fd);
+	return (void *)got;
+}
+
+/* A thread (not the process's first) accepts a connection, then waits in a read of it:
+ * the write of the connection's other end, after a while, ends its wait, and the first
+ * thread waits in a read of the echo meanwhile. */
+static void thread_waits_on_a_socket(void)
+{
+	int port;
+	waiting_listener = listener(1, &port);
+	pthread_t t;
+	check_eq("a thread to accept and read", 0,
+		 pthread_create(&t, NULL, accept_and_read, NULL));
+	usleep(20000); /* it waits in its accept meanwhile */
+	int c = connected(port);
+	check("connect to the thread's listener", c >= 0, "%s", errno_name(errno));
+	usleep(20000); /* and then in its read */
+	check_eq("the other end writes", 4, write(c, "ping", 4));
+	char echo[8];
+	check_eq("and reads the thread's echo", 4, read_full(c, echo, 4));
+	void *got = NULL;
+	check_eq("the thread ends", 0, pthread_join(t, &got));
+	check_eq("its read got the bytes", 4, (long)got);
+	close(c);
+	close(waiting_listener);
+}
+
 void area_sockets(void)
 {
 	tcp();
@@ -482,5 +523,6 @@ void area_sockets(void)
 	udp();
 	options_and_errors();
 	sendfile_to_socket();
+	thread_waits_on_a_socket();
 	socket_pair();
 }
