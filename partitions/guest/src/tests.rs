@@ -1807,6 +1807,27 @@ fn only_what_may_end_a_wait_serves_the_blocked_calls_again() {
     }
 }
 
+/// The `struct sockaddr_in` of 127.0.0.1:`port`.
+fn loopback(port: u16) -> [u8; 16] {
+    let [hi, lo] = port.to_be_bytes();
+    [2, 0, hi, lo, 127, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0, 0]
+}
+
+/// Where [`bound_socket`] leaves the socket's address, in the process's memory.
+const BOUND_ADDR: u64 = SCRATCH + 0x200;
+
+/// A socket of process `pid` (`SOCK_STREAM` 1 or `SOCK_DGRAM` 2 as `ty`) bound to
+/// 127.0.0.1:`port`, its address left at [`BOUND_ADDR`].
+fn bound_socket(g: &mut Guest, pid: u32, ty: u64, port: u16) -> u64 {
+    g.put(pid, BOUND_ADDR, &loopback(port));
+    let fd = g.call(pid, nr::socket, [2, ty, 0, 0, 0, 0]).unwrap();
+    assert_eq!(
+        g.call(pid, nr::bind, [fd, BOUND_ADDR, 16, 0, 0, 0]),
+        Some(0)
+    );
+    fd
+}
+
 /// A wake-up for `eth0`'s frames serves the blocked calls again only when the stack took
 /// frames in or a socket may have changed: one for frames an earlier run already took
 /// serves none (each retry is a whole call), nor does a tick for the stack's timers
@@ -1819,14 +1840,7 @@ fn frames_that_changed_nothing_serve_no_blocked_call_again() {
     let status = SCRATCH + 0x100;
     assert_eq!(g.call(1, nr::wait4, [u64::MAX, status, 0, 0, 0, 0]), None);
     // A listener on the loopback: the stack exists, with nothing to do.
-    let addr = SCRATCH + 0x200;
-    g.put(
-        child,
-        addr,
-        &[2, 0, 0x1f, 0x90, 127, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0, 0],
-    );
-    let l = g.call(child, nr::socket, [2, 1, 0, 0, 0, 0]).unwrap();
-    assert_eq!(g.call(child, nr::bind, [l, addr, 16, 0, 0, 0]), Some(0));
+    let l = bound_socket(&mut g, child, 1, 8080);
     assert_eq!(g.call(child, nr::listen, [l, 2, 0, 0, 0, 0]), Some(0));
     g.host.selected.clear();
     assert_eq!(g.system.frames_came(&mut g.fs, &mut g.host), None);
@@ -1857,32 +1871,16 @@ fn a_socket_change_serves_only_the_calls_waiting_on_that_socket() {
     let (reader, other, sender) = (g.fork(1), g.fork(1), g.fork(1));
     let status = SCRATCH + 0x100;
     assert_eq!(g.call(1, nr::wait4, [u64::MAX, status, 0, 0, 0, 0]), None);
-    let bound = |g: &mut Guest, pid: u32, port: u16| {
-        let addr = SCRATCH + 0x200;
-        let [hi, lo] = port.to_be_bytes();
-        g.put(
-            pid,
-            addr,
-            &[2, 0, hi, lo, 127, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0, 0],
-        );
-        let u = g.call(pid, nr::socket, [2, 2, 0, 0, 0, 0]).unwrap();
-        assert_eq!(g.call(pid, nr::bind, [u, addr, 16, 0, 0, 0]), Some(0));
-        u
-    };
-    let mine = bound(&mut g, reader, 7001);
-    let theirs = bound(&mut g, other, 7002);
+    let mine = bound_socket(&mut g, reader, 2, 7001);
+    let theirs = bound_socket(&mut g, other, 2, 7002);
     let buf = SCRATCH + 0x400;
     assert_eq!(g.call(reader, nr::recvfrom, [mine, buf, 64, 0, 0, 0]), None);
     assert_eq!(
         g.call(other, nr::recvfrom, [theirs, buf, 64, 0, 0, 0]),
         None
     );
-    let out = bound(&mut g, sender, 7003);
-    g.put(
-        sender,
-        SCRATCH + 0x300,
-        &[2, 0, 0x1b, 0x59, 127, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0, 0],
-    );
+    let out = bound_socket(&mut g, sender, 2, 7003);
+    g.put(sender, SCRATCH + 0x300, &loopback(7001));
     g.put(sender, buf, b"ping");
     g.host.selected.clear();
     let sendto = [out, buf, 4, 0, SCRATCH + 0x300, 16];
@@ -1935,19 +1933,14 @@ fn a_thread_waiting_on_a_socket_is_served_when_it_changes() {
     let _ = g
         .system
         .serve(thread, &mut g.fs, &mut g.host, ExceptionMessage::default());
-    let addr = SCRATCH + 0x200;
-    g.put(
-        thread,
-        addr,
-        &[2, 0, 0x1b, 0x59, 127, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0, 0],
-    );
-    let u = g.call(thread, nr::socket, [2, 2, 0, 0, 0, 0]).unwrap();
-    assert_eq!(g.call(thread, nr::bind, [u, addr, 16, 0, 0, 0]), Some(0));
+    // The thread's memory is its process's: init sends to the address it bound.
+    let u = bound_socket(&mut g, thread, 2, 7001);
     let buf = SCRATCH + 0x400;
     assert_eq!(g.call(thread, nr::recvfrom, [u, buf, 64, 0, 0, 0]), None);
     let out = g.call(1, nr::socket, [2, 2, 0, 0, 0, 0]).unwrap();
     g.put(1, buf, b"ping");
-    assert_eq!(g.call(1, nr::sendto, [out, buf, 4, 0, addr, 16]), Some(4));
+    let sendto = [out, buf, 4, 0, BOUND_ADDR, 16];
+    assert_eq!(g.call(1, nr::sendto, sendto), Some(4));
     assert_eq!(
         g.system.state(thread),
         Some(State::Running),
@@ -3964,10 +3957,7 @@ fn sockets_on_the_loopback_through_the_calls() {
     let mut w = World::new(&bytes);
     let (addr, len, data) = (SCRATCH + 0x100, SCRATCH + 0x200, SCRATCH + 0x300);
     let l = w.call(nr::socket, [2, 1, 0, 0, 0, 0]);
-    w.put(
-        addr,
-        &[2, 0, 0x1f, 0x90, 127, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0, 0],
-    );
+    w.put(addr, &loopback(8080));
     assert_eq!(w.call(nr::bind, [l, addr, 16, 0, 0, 0]), 0);
     assert_eq!(w.call(nr::listen, [l, 2, 0, 0, 0, 0]), 0);
     let c = w.call(nr::socket, [2, 1 | 0o4000, 0, 0, 0, 0]);
