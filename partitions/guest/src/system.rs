@@ -446,12 +446,8 @@ impl System {
         // calls are not served again (each retry is a whole call: a `poll` of all its
         // descriptors, an `accept`; most of a forked child's messages are its page faults
         // and such calls).
-        let runs_on = |slot: &Option<Slot>| {
-            matches!(slot, Some(s) if s.process.pid == pid
-                && !s.stopped
-                && matches!(s.state, State::Running))
-        };
-        if ended.is_none() && only_caller && self.slots.get(i).is_some_and(runs_on) {
+        let runs_on = matches!(self.caller_state(i, pid), Some(State::Running));
+        if ended.is_none() && only_caller && runs_on {
             return None;
         }
         if ended.is_some() {
@@ -478,16 +474,24 @@ impl System {
         })
     }
 
+    /// The state of process `pid` after one of its calls was served, if it is still in
+    /// slot `i` and not stopped.
+    fn caller_state(&self, i: usize, pid: u32) -> Option<&State> {
+        match self.slots.get(i) {
+            Some(Some(s)) if s.process.pid == pid && !s.stopped => Some(&s.state),
+            _ => None,
+        }
+    }
+
     /// What a call of process `pid` in slot `i` that waited for `waits` changed, now that
     /// it was served: a call on one socket whose caller runs on or waits changed that
     /// socket only (a read made room, a write queued bytes, an accept took a
     /// connection); any other call, or a caller that stopped or ended, anything.
     fn changed_by(&self, i: usize, pid: u32, waits: syscall::Waits) -> Woken {
-        let caller_goes_on = self.slots.get(i).is_some_and(|slot| {
-            matches!(slot, Some(s) if s.process.pid == pid
-                && !s.stopped
-                && matches!(s.state, State::Running | State::Blocked(_)))
-        });
+        let caller_goes_on = matches!(
+            self.caller_state(i, pid),
+            Some(State::Running | State::Blocked(_))
+        );
         match waits {
             syscall::Waits::Socket(id) if caller_goes_on => Woken::Sockets(alloc::vec![id]),
             _ => Woken::Anything,
@@ -530,18 +534,22 @@ impl System {
             .any_blocked()
             .then(|| self.events.next_expiry())
             .flatten();
-        self.slots
+        let alarms = self
+            .slots
             .iter()
             .flatten()
             .filter(|s| !matches!(s.state, State::Zombie(_)))
-            .flat_map(|s| {
-                let sleeping = matches!(s.state, State::Blocked(_)).then_some(s.process.wake_at);
-                [sleeping.flatten(), s.process.alarm_at]
-            })
+            .filter_map(|s| s.process.alarm_at);
+        self.sleeps().chain(alarms).chain(net).chain(timerfd).min()
+    }
+
+    /// When the sleeps and time-outs of the blocked calls end (the guest's clock).
+    fn sleeps(&self) -> impl Iterator<Item = u64> + '_ {
+        self.slots
+            .iter()
             .flatten()
-            .chain(net)
-            .chain(timerfd)
-            .min()
+            .filter(|s| matches!(s.state, State::Blocked(_)))
+            .filter_map(|s| s.process.wake_at)
     }
 
     /// Raises the alarms that are due and completes the sleeps that ended (called when the
@@ -567,9 +575,7 @@ impl System {
                 return Some(ended);
             }
         }
-        processes_due |= self.slots.iter().flatten().any(|s| {
-            matches!(s.state, State::Blocked(_)) && s.process.wake_at.is_some_and(|at| at <= now)
-        });
+        processes_due |= self.sleeps().any(|at| at <= now);
         let woken = if processes_due {
             Woken::Anything
         } else {
