@@ -317,13 +317,24 @@ pub fn handle(
     reply(p, m, result)
 }
 
-/// Whether serving `m` can change only its sender's state: an exception (a page fault
-/// maps the sender's memory; any other signals the sender) or a call of
-/// [`table::CALLER_ONLY`]. A signal's interruption (`VECTOR_INTERRUPT`) is not: the signal
-/// may stop or end the process.
-pub fn touches_only_caller(m: &ExceptionMessage) -> bool {
+/// Whether serving `m` of process `p` can end no other call's wait, changing only `p`'s
+/// state or adding to it: an exception (a page fault maps the sender's memory; any other
+/// signals the sender), a call of [`table::CALLER_ONLY`], a `close`, `dup2` or `dup3`
+/// that closes no file another call could wait on (the descriptor it closes or replaces
+/// is free, the console or a file of the file system), or a `fork`, `vfork` or `clone`
+/// (a new process or thread: a `wait4` never waits for a child not yet made). A signal's
+/// interruption (`VECTOR_INTERRUPT`) is not: the signal may stop or end the process.
+pub fn touches_only_caller(p: &Process, m: &ExceptionMessage) -> bool {
+    use crate::process::File;
+    let closes_nothing_waited_on =
+        |fd: u64| matches!(p.file(fd), None | Some(File::Console(_) | File::Open(_)));
     match m.vector {
-        VECTOR_SYSCALL => table::caller_only(m.registers.rax),
+        VECTOR_SYSCALL => match m.registers.rax {
+            linux::nr::close => closes_nothing_waited_on(m.registers.rdi),
+            linux::nr::dup2 | linux::nr::dup3 => closes_nothing_waited_on(m.registers.rsi),
+            linux::nr::fork | linux::nr::vfork | linux::nr::clone | linux::nr::clone3 => true,
+            number => table::caller_only(number),
+        },
         VECTOR_INTERRUPT => false,
         _ => true,
     }
@@ -335,7 +346,8 @@ pub fn touches_only_caller(m: &ExceptionMessage) -> bool {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Waits {
     /// A call on one socket of the stack (its id): a read, write, send, receive, accept
-    /// or connect of it.
+    /// or connect of it (and the calls that never wait but change it alone: its `bind`,
+    /// `listen`, `shutdown`, options, names, `close`, a `sendfile` to it).
     Socket(usize),
     /// Not on the stack: a child, a futex, a sleep, a signal, or a descriptor that is no
     /// socket of the stack (a pipe, the terminal, an `AF_UNIX` pair).
@@ -344,7 +356,9 @@ pub enum Waits {
     Anything,
 }
 
-/// What the call in `m` of process `p` waits for when it cannot finish.
+/// What the call in `m` of process `p` waits for when it cannot finish, and so what it
+/// changes when it does ([`crate::system`]): a call of one socket of the stack changes
+/// that socket only (its `close` the socket at most, `sendfile` the socket it writes).
 pub fn waits_on(p: &Process, m: &ExceptionMessage) -> Waits {
     use linux::nr;
     if m.vector != VECTOR_SYSCALL {
@@ -361,7 +375,16 @@ pub fn waits_on(p: &Process, m: &ExceptionMessage) -> Waits {
         | nr::sendmsg
         | nr::accept
         | nr::accept4
-        | nr::connect => match p.file(m.registers.rdi) {
+        | nr::connect
+        | nr::bind
+        | nr::listen
+        | nr::shutdown
+        | nr::setsockopt
+        | nr::getsockopt
+        | nr::getsockname
+        | nr::getpeername
+        | nr::sendfile
+        | nr::close => match p.file(m.registers.rdi) {
             Some(crate::process::File::Socket(id)) => Waits::Socket(id),
             _ => Waits::Elsewhere,
         },

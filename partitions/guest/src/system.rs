@@ -425,7 +425,12 @@ impl System {
         let tgid = self.slots[i].as_ref()?.process.tgid;
         self.lend(i);
         let slot = self.slots[i].as_mut()?;
-        let only_caller = matches!(slot.state, State::Running) && syscall::touches_only_caller(&m);
+        // A new process's first message starts it: nobody else's wait ends with that.
+        let only_caller = match slot.state {
+            State::Running => syscall::touches_only_caller(&slot.process, &m),
+            State::Starting(_) => true,
+            _ => false,
+        };
         let waits = match slot.state {
             State::Running => syscall::waits_on(&slot.process, &m),
             _ => syscall::Waits::Anything,
@@ -484,16 +489,23 @@ impl System {
     }
 
     /// What a call of process `pid` in slot `i` that waited for `waits` changed, now that
-    /// it was served: a call on one socket whose caller runs on or waits changed that
-    /// socket only (a read made room, a write queued bytes, an accept took a
-    /// connection); any other call, or a caller that stopped or ended, anything.
+    /// it was served: a call kept to be served again changed nothing ([`Outcome::Block`]:
+    /// only what the stack's run then changes serves others, a blocking `connect`'s SYN),
+    /// unless it moved part of a blocking write into a pipe before it had to wait
+    /// (`pipe_written`: a reader can go on) or raised a signal its caller must now take (a
+    /// background read of the terminal: SIGTTIN to its group); a call on one socket whose
+    /// caller runs on changed that socket only (a read made room, a write queued bytes,
+    /// an accept took a connection); any other call, or a caller that stopped or ended,
+    /// anything.
     fn changed_by(&self, i: usize, pid: u32, waits: syscall::Waits) -> Woken {
-        let caller_goes_on = matches!(
-            self.caller_state(i, pid),
-            Some(State::Running | State::Blocked(_))
-        );
-        match waits {
-            syscall::Waits::Socket(id) if caller_goes_on => Woken::Sockets(alloc::vec![id]),
+        let changed_nothing = || {
+            self.slots[i]
+                .as_ref()
+                .is_some_and(|s| s.process.pipe_written == 0 && s.process.deliverable() == 0)
+        };
+        match (self.caller_state(i, pid), waits) {
+            (Some(State::Blocked(_)), _) if changed_nothing() => Woken::Sockets(Vec::new()),
+            (Some(State::Running), syscall::Waits::Socket(id)) => Woken::Sockets(alloc::vec![id]),
             _ => Woken::Anything,
         }
     }

@@ -1754,6 +1754,8 @@ fn only_what_may_end_a_wait_serves_the_blocked_calls_again() {
     let bytes = initramfs();
     let mut g = Guest::new(&bytes);
     let child = g.fork(1);
+    assert_eq!(g.call(child, nr::pipe2, [SCRATCH, 0, 0, 0, 0, 0]), Some(0));
+    let w = g.word(child, SCRATCH + 4) as u64;
     let status = SCRATCH + 0x100;
     assert_eq!(g.call(1, nr::wait4, [u64::MAX, status, 0, 0, 0, 0]), None);
     g.host.selected.clear();
@@ -1775,12 +1777,26 @@ fn only_what_may_end_a_wait_serves_the_blocked_calls_again() {
         [child, child, child],
         "init's wait4 stays as it was"
     );
-    // A close may end a wait (a pipe's last writer): init's wait4 is served again.
+    // Closing no descriptor changes nothing; closing a pipe's end may end a wait (its
+    // last writer's): init's wait4 is served again.
     assert_eq!(
         g.call(child, nr::close, [99, 0, 0, 0, 0, 0]),
         Some(err(Errno::EBADF))
     );
-    assert_eq!(g.host.selected, [child, child, child, child, 1]);
+    assert_eq!(g.host.selected, [child, child, child, child]);
+    // Nor does a new process (nobody waits for a child not yet made).
+    let grandchild = g.fork(child);
+    assert!(
+        !g.host.selected.contains(&1),
+        "init's wait4 stays after a fork"
+    );
+    assert_eq!(
+        g.serve(grandchild, World::message(nr::exit_group, [0; 6], 0)),
+        []
+    );
+    g.host.selected.clear();
+    assert_eq!(g.call(child, nr::close, [w, 0, 0, 0, 0, 0]), Some(0));
+    assert_eq!(g.host.selected, [child, 1]);
     assert!(matches!(g.system.state(1), Some(State::Blocked(_))));
     assert_eq!(
         g.serve(child, World::message(nr::exit_group, [0; 6], 0)),
@@ -1915,6 +1931,106 @@ fn a_socket_change_serves_only_the_calls_waiting_on_that_socket() {
         "its sleep ended"
     );
     assert!(matches!(g.system.state(other), Some(State::Blocked(_))));
+}
+
+/// A call that waits changed nothing: no other waiting call is served again for it, nor
+/// the calls waiting on its own socket (its own included).
+#[test]
+fn a_call_that_waits_serves_no_waiting_call_again() {
+    let bytes = initramfs();
+    let mut g = Guest::new(&bytes);
+    let (reader, piper, sender) = (g.fork(1), g.fork(1), g.fork(1));
+    let status = SCRATCH + 0x100;
+    assert_eq!(g.call(1, nr::wait4, [u64::MAX, status, 0, 0, 0, 0]), None);
+    let socket = bound_socket(&mut g, reader, 2, 7001);
+    let thread = 0x3d0f00; // pthread_create's clone
+    let tid = g.call(
+        reader,
+        nr::clone,
+        [
+            thread,
+            SCRATCH + 0x800,
+            SCRATCH + 0x10,
+            SCRATCH + 0x14,
+            0,
+            0,
+        ],
+    );
+    let second = u32::try_from(tid.unwrap()).unwrap();
+    let _ = g
+        .system
+        .serve(second, &mut g.fs, &mut g.host, ExceptionMessage::default());
+    let buf = SCRATCH + 0x400;
+    assert_eq!(
+        g.call(reader, nr::recvfrom, [socket, buf, 64, 0, 0, 0]),
+        None
+    );
+    assert_eq!(g.call(piper, nr::pipe2, [SCRATCH, 0, 0, 0, 0, 0]), Some(0));
+    let r = g.word(piper, SCRATCH) as u64;
+    let before = g.system.served_again;
+    g.host.selected.clear();
+    // A read of an empty pipe (another process's table's call) and a second wait on the
+    // same socket.
+    assert_eq!(g.call(piper, nr::read, [r, buf, 16, 0, 0, 0]), None);
+    assert!(
+        !g.host.selected.contains(&1) && !g.host.selected.contains(&reader),
+        "init's wait4 and the reader stay as they are"
+    );
+    g.host.selected.clear();
+    assert_eq!(
+        g.call(second, nr::recvfrom, [socket, buf, 64, 0, 0, 0]),
+        None
+    );
+    assert!(
+        !g.host.selected.contains(&reader),
+        "the first reader is not served again"
+    );
+    assert_eq!(g.system.served_again, before);
+    // A datagram for the socket still serves its waiting calls.
+    let out = g.call(sender, nr::socket, [2, 2, 0, 0, 0, 0]).unwrap();
+    g.put(sender, SCRATCH + 0x300, &loopback(7001));
+    g.put(sender, buf, b"ping");
+    let sendto = [out, buf, 4, 0, SCRATCH + 0x300, 16];
+    assert_eq!(g.call(sender, nr::sendto, sendto), Some(4));
+    assert!(g.system.served_again > before);
+    assert_eq!(
+        g.system.state(reader),
+        Some(State::Running),
+        "its recvfrom finished"
+    );
+}
+
+/// A blocking write that moved part of its bytes into a pipe before it had to wait
+/// changed the pipe: the reader waiting on it is served and reads, and the writer goes on
+/// as the reader makes room.
+#[test]
+fn a_write_that_waits_after_filling_a_pipe_serves_its_reader() {
+    use crate::pipe::PIPE_CAPACITY;
+    let bytes = initramfs();
+    let mut g = Guest::new(&bytes);
+    assert_eq!(g.call(1, nr::pipe2, [SCRATCH, 0, 0, 0, 0, 0]), Some(0));
+    let (r, w) = (g.word(1, SCRATCH) as u64, g.word(1, SCRATCH + 4) as u64);
+    let reader = g.fork(1);
+    let buf = SCRATCH + 0x100;
+    assert_eq!(g.call(reader, nr::read, [r, buf, 16, 0, 0, 0]), None);
+    let total = (PIPE_CAPACITY + 4096) as u64;
+    let data = g
+        .call(1, nr::mmap, [0, total, 3, 0x22, u64::MAX, 0])
+        .unwrap();
+    g.put(1, data, b"first");
+    let replies = g.serve(1, World::message(nr::write, [w, data, total, 0, 0, 0], 0));
+    assert_eq!(replies, [(reader, 16)], "the reader took the first bytes");
+    assert_eq!(g.get(reader, buf, 5), b"first");
+    // The reader drains the pipe; the writer's last bytes go in and its write returns.
+    let mut finished = false;
+    for _ in 0..32 {
+        let replies = g.serve(reader, World::message(nr::read, [r, buf, 3000, 0, 0, 0], 0));
+        if replies.contains(&(1, total)) {
+            finished = true;
+            break;
+        }
+    }
+    assert!(finished, "the whole write returned");
 }
 
 /// A thread waiting on a socket is served again when the socket changes: what it waits
@@ -2717,6 +2833,8 @@ fn sleeps_end_when_their_time_comes_or_with_eintr() {
     );
     let due = g.system.next_timer().unwrap();
     assert!(due > 0);
+    // The main loop ticks once the sleep is due.
+    g.host.now = g.host.now.max(due);
     g.host.resumed.clear();
     assert_eq!(g.system.tick(&mut g.fs, &mut g.host, false), None);
     assert_eq!(g.host.resumed.len(), 1, "slept long enough");
@@ -4552,6 +4670,7 @@ fn threads_are_placed_on_the_guests_cpus() {
         g.serve(c, on_stack(nr::nanosleep, [SCRATCH, 0, 0, 0, 0, 0]))
             .is_empty()
     );
+    g.host.now = g.host.now.max(g.system.next_timer().unwrap());
     assert_eq!(g.system.tick(&mut g.fs, &mut g.host, false), None);
     assert_eq!(
         g.host.moves.last(),

@@ -404,6 +404,11 @@ pub const CALLER_ONLY: &[u64] = &[
     nr::getcwd,
     nr::umask,
     nr::lseek,
+    // The guest has no FIFO or terminal whose opening another call waits for.
+    nr::open,
+    nr::openat,
+    // Another descriptor of an open file: nothing is closed.
+    nr::dup,
 ];
 
 /// [`CALLER_ONLY`] as one bit per number, for a lookup per message (every number is below
