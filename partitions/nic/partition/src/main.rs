@@ -18,7 +18,8 @@
 //! frame with another source MAC is dropped. Then it waits for the device's interrupt (for
 //! received frames; for sent ones only while the transmit queue is full), a tenant's
 //! doorbell (syssw notifies it when a tenant's frames or wake-ups arrive) or a tenant's
-//! notification that a frame went into its empty ring, at most [`POLL`].
+//! notification that a frame went into its empty ring, at most [`POLL`] while a tenant
+//! has no doorbell (its port is polled), else at most [`IDLE_POLL`].
 //!
 //! Log lines (on the serial log as `[<partition>] nic: ...`; an interface):
 //! - `nic: virtio-net <BB:DD.F> MAC <mac>, <n> descriptors a queue, line <irq>, <k> tenant(s)`
@@ -63,8 +64,12 @@ use nic_core::virtio::{self, Memory, RECEIVE_QUEUE, TRANSMIT_QUEUE, Used};
 /// Frames a tenant may have taken from its port per round of the switch.
 const BUDGET: u32 = 8;
 /// Longest wait for the device's interrupt or a tenant's doorbell before the tenants'
-/// ports are looked at again (a tenant without a doorbell is found then).
+/// ports are looked at again, while a tenant has no doorbell (it is found then).
 const POLL: Duration = Duration::from_micros(500);
+/// Longest wait when every tenant has its doorbell: nothing arrives unannounced, the
+/// look only in case a wake-up was lost (an idle switch then wakes a hundred times a
+/// second, not two thousand, and takes no CPU from the partitions that run).
+const IDLE_POLL: Duration = Duration::from_millis(10);
 /// The notification bit the device's interrupt line fires as (an index).
 const IRQ_BIT: u64 = 8;
 /// The notification bit of tenant 0's doorbell (syssw rings it when the tenant's frames or
@@ -110,6 +115,8 @@ struct Link {
     /// The tenant woken for its ring: by a notification, by a message on its port.
     notified: u64,
     kicked: u64,
+    /// syssw rings the switch's doorbell when something arrives at `from`.
+    doorbell: bool,
 }
 
 impl Link {
@@ -372,12 +379,16 @@ extern "C" fn run() {
                 return;
             }
         };
-        if let Err(e) = link.ring_on_arrival(1 << (DOORBELL_BIT + n as u64)) {
-            println!(
-                "nic: tenant {}: no doorbell ({e:?}); its port is polled",
-                t.partition
-            );
-        }
+        let doorbell = match link.ring_on_arrival(1 << (DOORBELL_BIT + n as u64)) {
+            Ok(()) => true,
+            Err(e) => {
+                println!(
+                    "nic: tenant {}: no doorbell ({e:?}); its port is polled",
+                    t.partition
+                );
+                false
+            }
+        };
         let ring = match t.ring {
             None => None,
             Some(r) => {
@@ -408,6 +419,7 @@ extern "C" fn run() {
             bad: 0,
             notified: 0,
             kicked: 0,
+            doorbell,
         });
     }
     if let Err(e) = sys::irq_attach(u64::from(line), IRQ_BIT) {
@@ -466,7 +478,11 @@ extern "C" fn run() {
         }
         let tenants = (1u64 << nic.links.len()) - 1;
         let (doorbells, rings) = (tenants << DOORBELL_BIT, tenants << RING_BIT);
-        let wait = sys::notify_wait(1 << IRQ_BIT | doorbells | rings, POLL.as_nanos() as u64);
+        let poll = match nic.links.iter().all(|l| l.doorbell) {
+            true => IDLE_POLL,
+            false => POLL,
+        };
+        let wait = sys::notify_wait(1 << IRQ_BIT | doorbells | rings, poll.as_nanos() as u64);
         let bits = wait.unwrap_or(0);
         if bits & 1 << IRQ_BIT != 0 {
             nic.net.interrupt_status();
