@@ -115,8 +115,6 @@ struct Link {
     /// The tenant woken for its ring: by a notification, by a message on its port.
     notified: u64,
     kicked: u64,
-    /// syssw rings the switch's doorbell when something arrives at `from`.
-    doorbell: bool,
 }
 
 impl Link {
@@ -371,6 +369,8 @@ extern "C" fn run() {
         }
     };
     let mut links = Vec::new();
+    // The longest wait of the switch: set once, by whether every tenant has its doorbell.
+    let mut poll = IDLE_POLL;
     for (n, t) in table.tenants().enumerate() {
         let link = match link::open(&t.from, &t.to) {
             Ok(link) => link,
@@ -379,16 +379,13 @@ extern "C" fn run() {
                 return;
             }
         };
-        let doorbell = match link.ring_on_arrival(1 << (DOORBELL_BIT + n as u64)) {
-            Ok(()) => true,
-            Err(e) => {
-                println!(
-                    "nic: tenant {}: no doorbell ({e:?}); its port is polled",
-                    t.partition
-                );
-                false
-            }
-        };
+        if let Err(e) = link.ring_on_arrival(1 << (DOORBELL_BIT + n as u64)) {
+            println!(
+                "nic: tenant {}: no doorbell ({e:?}); its port is polled",
+                t.partition
+            );
+            poll = POLL;
+        }
         let ring = match t.ring {
             None => None,
             Some(r) => {
@@ -419,7 +416,6 @@ extern "C" fn run() {
             bad: 0,
             notified: 0,
             kicked: 0,
-            doorbell,
         });
     }
     if let Err(e) = sys::irq_attach(u64::from(line), IRQ_BIT) {
@@ -478,10 +474,6 @@ extern "C" fn run() {
         }
         let tenants = (1u64 << nic.links.len()) - 1;
         let (doorbells, rings) = (tenants << DOORBELL_BIT, tenants << RING_BIT);
-        let poll = match nic.links.iter().all(|l| l.doorbell) {
-            true => IDLE_POLL,
-            false => POLL,
-        };
         let wait = sys::notify_wait(1 << IRQ_BIT | doorbells | rings, poll.as_nanos() as u64);
         let bits = wait.unwrap_or(0);
         if bits & 1 << IRQ_BIT != 0 {
