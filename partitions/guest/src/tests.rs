@@ -1823,6 +1823,15 @@ fn only_what_may_end_a_wait_serves_the_blocked_calls_again() {
     }
 }
 
+/// Process `pid` sends the datagram "ping" from a new UDP socket to the `struct
+/// sockaddr_in` at `to` in its memory; the `sendto`'s result.
+fn send_ping(g: &mut Guest, pid: u32, to: u64) -> Option<u64> {
+    let out = g.call(pid, nr::socket, [2, 2, 0, 0, 0, 0]).unwrap();
+    let ping = SCRATCH + 0x600;
+    g.put(pid, ping, b"ping");
+    g.call(pid, nr::sendto, [out, ping, 4, 0, to, 16])
+}
+
 /// The `struct sockaddr_in` of 127.0.0.1:`port`.
 fn loopback(port: u16) -> [u8; 16] {
     let [hi, lo] = port.to_be_bytes();
@@ -1987,11 +1996,8 @@ fn a_call_that_waits_serves_no_waiting_call_again() {
     );
     assert_eq!(g.system.served_again, before);
     // A datagram for the socket still serves its waiting calls.
-    let out = g.call(sender, nr::socket, [2, 2, 0, 0, 0, 0]).unwrap();
     g.put(sender, SCRATCH + 0x300, &loopback(7001));
-    g.put(sender, buf, b"ping");
-    let sendto = [out, buf, 4, 0, SCRATCH + 0x300, 16];
-    assert_eq!(g.call(sender, nr::sendto, sendto), Some(4));
+    assert_eq!(send_ping(&mut g, sender, SCRATCH + 0x300), Some(4));
     assert!(g.system.served_again > before);
     assert_eq!(
         g.system.state(reader),
@@ -2053,10 +2059,7 @@ fn a_thread_waiting_on_a_socket_is_served_when_it_changes() {
     let u = bound_socket(&mut g, thread, 2, 7001);
     let buf = SCRATCH + 0x400;
     assert_eq!(g.call(thread, nr::recvfrom, [u, buf, 64, 0, 0, 0]), None);
-    let out = g.call(1, nr::socket, [2, 2, 0, 0, 0, 0]).unwrap();
-    g.put(1, buf, b"ping");
-    let sendto = [out, buf, 4, 0, BOUND_ADDR, 16];
-    assert_eq!(g.call(1, nr::sendto, sendto), Some(4));
+    assert_eq!(send_ping(&mut g, 1, BOUND_ADDR), Some(4));
     assert_eq!(
         g.system.state(thread),
         Some(State::Running),
