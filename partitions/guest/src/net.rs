@@ -226,9 +226,12 @@ pub struct Net {
     pub tx_dropped: u64,
     /// Ring slots with no frame in them (a bogus length or index the NIC partition wrote).
     pub rx_bad: u64,
-    /// When the `rx` port was last looked at, and whether frames came then.
+    /// When the `rx` port (or ring) was last looked at, and whether frames came then.
     rx_looked_ns: u64,
     rx_busy: bool,
+    /// The NIC partition notifies the guest's doorbell thread when a frame goes into the
+    /// empty ring ([`Net::wake_on_frames`]): then no look at the ring is timed.
+    ring_notifies: bool,
     /// The IPv4 multicast groups each socket joined on `eth0` (`IP_ADD_MEMBERSHIP`, by
     /// [`SocketId`]): the interface is in a group while a socket is.
     memberships: Vec<(usize, Ipv4Address)>,
@@ -257,6 +260,7 @@ impl Net {
             rx_bad: 0,
             rx_looked_ns: 0,
             rx_busy: false,
+            ring_notifies: false,
             memberships: Vec::new(),
         }
     }
@@ -282,6 +286,7 @@ impl Net {
     pub fn wake_on_frames(&mut self, thread: u64, bits: u64) {
         if let Some((_, from)) = self.ring.as_mut() {
             from.wake_me(thread, bits);
+            self.ring_notifies = true;
         }
     }
 
@@ -343,8 +348,9 @@ impl Net {
                     break;
                 }
             }
-            self.rx_looked_ns = now;
         }
+        // Taking what the ring holds is the look (no call to syssw).
+        self.rx_looked_ns = now;
         let mut frame = [0u8; frame_ring::MTU];
         let mut took = false;
         for _ in 0..LIMITS.frames {
@@ -518,8 +524,13 @@ impl Net {
     /// its processes).
     pub fn poll_at_ns(&mut self) -> Option<u64> {
         // The port's doorbell tells of frames ([`Net::messages_came`]); look every
-        // [`RX_POLL_NS`] too, in case it could not be set.
-        let rx = self.link.map(|_| self.rx_looked_ns + RX_POLL_NS);
+        // [`RX_POLL_NS`] too, in case it could not be set. The ring's notification needs
+        // no such look: the NIC partition notifies whenever the ring was empty, and
+        // kicks the `rx` port (the doorbell) if the kernel refuses.
+        let rx = self
+            .link
+            .filter(|_| !self.ring_notifies)
+            .map(|_| self.rx_looked_ns + RX_POLL_NS);
         let at = self.stack.as_mut().and_then(|s| s.poll_at());
         let at = at.map(|at| (at.max(0) as u64).saturating_mul(1000));
         let at = match (at, rx) {

@@ -4329,21 +4329,31 @@ fn a_guest_notifies_the_thread_its_ring_names_and_kicks_when_the_kernel_refuses(
     talk_through_a_frame_ring(Some(REFUSED_THREAD));
 }
 
+/// A 64 KiB segment in the test's memory, cache-line aligned as a shared segment is.
+#[repr(C, align(64))]
+#[derive(Clone, Copy)]
+struct Line([u8; 64]);
+
+type RingEnds = (frame_ring::Producer, frame_ring::Consumer);
+
+/// A frame ring in a fresh segment: the segment (keep it for as long as the ends live),
+/// the tenant's ends and the NIC partition's.
 #[allow(unsafe_code)]
-fn talk_through_a_frame_ring(nic_thread: Option<u64>) {
-    use crate::net::Net;
-    #[repr(C, align(64))]
-    #[derive(Clone, Copy)]
-    struct Line([u8; 64]);
+fn frame_ring_segment() -> (Vec<Line>, RingEnds, RingEnds) {
     let size = 64 * 1024;
     let mut segment = vec![Line([0; 64]); size / 64];
     let at = segment.as_mut_ptr() as *mut u8;
-    // SAFETY: the segment outlives both ends (dropped at the end of the test), and only
-    // they write it.
+    // SAFETY: the caller keeps the segment (its heap block does not move with the Vec)
+    // while the ends live, and only they write it.
     let tenant = unsafe { frame_ring::attach(at, size, frame_ring::Side::Tenant) }.unwrap();
     // SAFETY: as above.
-    let (mut nic_to, mut nic_from) =
-        unsafe { frame_ring::attach(at, size, frame_ring::Side::Driver) }.unwrap();
+    let driver = unsafe { frame_ring::attach(at, size, frame_ring::Side::Driver) }.unwrap();
+    (segment, tenant, driver)
+}
+
+fn talk_through_a_frame_ring(nic_thread: Option<u64>) {
+    use crate::net::Net;
+    let (_segment, tenant, (mut nic_to, mut nic_from)) = frame_ring_segment();
     let (rx, tx) = (0, 1);
     let (mut a, mut b) = two_eth0s();
     a.0.link_ring(tenant);
@@ -4433,6 +4443,37 @@ fn talk_through_a_frame_ring(nic_thread: Option<u64>) {
         "the wake-ups are drained"
     );
     assert_eq!((a.0.tx_dropped, a.0.rx_bad), (0, 0));
+}
+
+/// A guest told of the frames in its ring (its doorbell thread named in the ring) sets
+/// no timer to look at the ring: an idle stack leaves it waiting. Without that it looks
+/// again RX_POLL_NS after its last run, as at its `rx` port.
+#[test]
+fn only_a_ring_that_does_not_ring_is_looked_at_on_a_timer() {
+    use crate::net::{Net, NetConfig, RX_POLL_NS};
+    use netstack::{Ipv4Address, SocketAddr};
+    for rings in [true, false] {
+        let (_segment, tenant, _driver) = frame_ring_segment();
+        let mut net = Net::new(Some(NetConfig {
+            mac: [2, 0, 0, 0, 0, 1],
+            address: Ipv4Address::new(10, 0, 2, 15),
+            prefix: 24,
+            gateway: None,
+        }));
+        net.link(0, 1);
+        net.link_ring(tenant);
+        if rings {
+            net.wake_on_frames(3, 2);
+        }
+        let listener = net.stack(0).socket(2, 1, 0).unwrap();
+        let any = SocketAddr::new(Ipv4Address::UNSPECIFIED, 80);
+        net.stack(0).bind(listener, any).unwrap();
+        net.stack(0).listen(listener, 4).unwrap();
+        let mut host = Model::new(0);
+        net.run(&mut host);
+        let expected = (!rings).then_some(host.now + RX_POLL_NS);
+        assert_eq!(net.poll_at_ns(), expected, "told of frames: {rings}");
+    }
 }
 
 #[test]
