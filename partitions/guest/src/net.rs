@@ -232,6 +232,9 @@ pub struct Net {
     /// The NIC partition notifies the guest's doorbell thread when a frame goes into the
     /// empty ring ([`Net::wake_on_frames`]): then no look at the ring is timed.
     ring_notifies: bool,
+    /// The last run left frames in the ring (a run takes at most [`LIMITS`]`.frames`):
+    /// no notification comes for them (the ring is not empty), so the next run is due.
+    ring_left: bool,
     /// The IPv4 multicast groups each socket joined on `eth0` (`IP_ADD_MEMBERSHIP`, by
     /// [`SocketId`]): the interface is in a group while a socket is.
     memberships: Vec<(usize, Ipv4Address)>,
@@ -261,6 +264,7 @@ impl Net {
             rx_looked_ns: 0,
             rx_busy: false,
             ring_notifies: false,
+            ring_left: false,
             memberships: Vec::new(),
         }
     }
@@ -366,6 +370,7 @@ impl Net {
                 Some(Err(_)) => self.rx_bad += 1,
             }
         }
+        self.ring_left = self.ring.as_ref().is_some_and(|(_, from)| !from.is_empty());
         let changed = self.poll(now) || took;
         let (mut dropped, mut kick) = (0, false);
         let Some(stack) = self.stack.as_mut() else {
@@ -526,11 +531,15 @@ impl Net {
         // The port's doorbell tells of frames ([`Net::messages_came`]); look every
         // [`RX_POLL_NS`] too, in case it could not be set. The ring's notification needs
         // no such look: the NIC partition notifies whenever the ring was empty, and
-        // kicks the `rx` port (the doorbell) if the kernel refuses.
-        let rx = self
-            .link
-            .filter(|_| !self.ring_notifies)
-            .map(|_| self.rx_looked_ns + RX_POLL_NS);
+        // kicks the `rx` port (the doorbell) if the kernel refuses; frames a run left in
+        // it are due at once.
+        let rx = match self.ring_left {
+            true => Some(0),
+            false => self
+                .link
+                .filter(|_| !self.ring_notifies)
+                .map(|_| self.rx_looked_ns + RX_POLL_NS),
+        };
         let at = self.stack.as_mut().and_then(|s| s.poll_at());
         let at = at.map(|at| (at.max(0) as u64).saturating_mul(1000));
         let at = match (at, rx) {

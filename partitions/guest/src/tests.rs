@@ -4329,18 +4329,17 @@ fn a_guest_notifies_the_thread_its_ring_names_and_kicks_when_the_kernel_refuses(
     talk_through_a_frame_ring(Some(REFUSED_THREAD));
 }
 
-/// A 64 KiB segment in the test's memory, cache-line aligned as a shared segment is.
+/// A segment in the test's memory, cache-line aligned as a shared segment is.
 #[repr(C, align(64))]
 #[derive(Clone, Copy)]
 struct Line([u8; 64]);
 
 type RingEnds = (frame_ring::Producer, frame_ring::Consumer);
 
-/// A frame ring in a fresh segment: the segment (keep it for as long as the ends live),
-/// the tenant's ends and the NIC partition's.
+/// A frame ring in a fresh segment of `size` bytes: the segment (keep it for as long as
+/// the ends live), the tenant's ends and the NIC partition's.
 #[allow(unsafe_code)]
-fn frame_ring_segment() -> (Vec<Line>, RingEnds, RingEnds) {
-    let size = 64 * 1024;
+fn frame_ring_segment(size: usize) -> (Vec<Line>, RingEnds, RingEnds) {
     let mut segment = vec![Line([0; 64]); size / 64];
     let at = segment.as_mut_ptr() as *mut u8;
     // SAFETY: the caller keeps the segment (its heap block does not move with the Vec)
@@ -4353,7 +4352,7 @@ fn frame_ring_segment() -> (Vec<Line>, RingEnds, RingEnds) {
 
 fn talk_through_a_frame_ring(nic_thread: Option<u64>) {
     use crate::net::Net;
-    let (_segment, tenant, (mut nic_to, mut nic_from)) = frame_ring_segment();
+    let (_segment, tenant, (mut nic_to, mut nic_from)) = frame_ring_segment(64 * 1024);
     let (rx, tx) = (0, 1);
     let (mut a, mut b) = two_eth0s();
     a.0.link_ring(tenant);
@@ -4453,7 +4452,7 @@ fn only_a_ring_that_does_not_ring_is_looked_at_on_a_timer() {
     use crate::net::{Net, NetConfig, RX_POLL_NS};
     use netstack::{Ipv4Address, SocketAddr};
     for rings in [true, false] {
-        let (_segment, tenant, _driver) = frame_ring_segment();
+        let (_segment, tenant, _driver) = frame_ring_segment(64 * 1024);
         let mut net = Net::new(Some(NetConfig {
             mac: [2, 0, 0, 0, 0, 1],
             address: Ipv4Address::new(10, 0, 2, 15),
@@ -4474,6 +4473,40 @@ fn only_a_ring_that_does_not_ring_is_looked_at_on_a_timer() {
         let expected = (!rings).then_some(host.now + RX_POLL_NS);
         assert_eq!(net.poll_at_ns(), expected, "told of frames: {rings}");
     }
+}
+
+/// A run takes at most LIMITS.frames from the ring; the NIC partition notifies only when
+/// a frame goes into an empty ring, so for what a run left the next run is due at once
+/// (at the stack's floor), and once the ring is empty nothing is.
+#[test]
+fn frames_a_run_left_in_the_ring_are_due_at_once() {
+    use crate::net::{LIMITS, MIN_POLL_GAP_NS, Net, NetConfig};
+    use netstack::Ipv4Address;
+    let (_segment, tenant, (mut nic_to, _)) = frame_ring_segment(512 * 1024);
+    let mut net = Net::new(Some(NetConfig {
+        mac: [2, 0, 0, 0, 0, 1],
+        address: Ipv4Address::new(10, 0, 2, 15),
+        prefix: 24,
+        gateway: None,
+    }));
+    net.link(0, 1);
+    net.link_ring(tenant);
+    net.wake_on_frames(3, 2);
+    let mut host = Model::new(0);
+    net.run(&mut host);
+    assert_eq!(net.poll_at_ns(), None, "nothing to do");
+    // Broadcasts of another host's, more than a run takes.
+    let mut frame = [0u8; 60];
+    frame[..6].fill(0xff);
+    frame[6..12].copy_from_slice(&[2, 0, 0, 0, 0, 9]);
+    assert!(nic_to.slots() as usize > LIMITS.frames + 5);
+    for _ in 0..LIMITS.frames + 5 {
+        nic_to.push(&frame).unwrap();
+    }
+    net.run(&mut host);
+    assert_eq!(net.poll_at_ns(), Some(host.now + MIN_POLL_GAP_NS));
+    net.run(&mut host);
+    assert_eq!(net.poll_at_ns(), None, "the ring is empty");
 }
 
 #[test]
