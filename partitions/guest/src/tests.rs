@@ -4124,21 +4124,23 @@ fn sockets_on_the_loopback_through_the_calls() {
     assert_eq!(w.net.open_count(), 0);
 }
 
-/// Guest `a` (10.0.2.15) and guest `b` (10.0.2.16), each with `eth0` linked to ports 0
-/// (received frames) and 1 (frames to send) of its model.
-fn two_eth0s() -> ((crate::net::Net, Model), (crate::net::Net, Model)) {
+/// A guest's network with `eth0` at 10.0.2.`ip` (MAC 02:00:00:00:00:`mac`), linked to
+/// ports 0 (received frames) and 1 (frames to send).
+fn eth0(mac: u8, ip: u8) -> crate::net::Net {
     use crate::net::{Net, NetConfig};
-    let eth0 = |mac: u8, ip: u8| {
-        let mut net = Net::new(Some(NetConfig {
-            mac: [2, 0, 0, 0, 0, mac],
-            address: netstack::Ipv4Address::new(10, 0, 2, ip),
-            prefix: 24,
-            gateway: None,
-        }));
-        net.link(0, 1);
-        (net, Model::new(0))
-    };
-    (eth0(1, 15), eth0(2, 16))
+    let mut net = Net::new(Some(NetConfig {
+        mac: [2, 0, 0, 0, 0, mac],
+        address: netstack::Ipv4Address::new(10, 0, 2, ip),
+        prefix: 24,
+        gateway: None,
+    }));
+    net.link(0, 1);
+    net
+}
+
+/// Guest `a` (10.0.2.15) and guest `b` (10.0.2.16), each with its [`eth0`] and its model.
+fn two_eth0s() -> ((crate::net::Net, Model), (crate::net::Net, Model)) {
+    ((eth0(1, 15), Model::new(0)), (eth0(2, 16), Model::new(0)))
 }
 
 /// `a` connects to port 80 of `b`, `step` carrying the frames between them: the client's
@@ -4449,17 +4451,11 @@ fn talk_through_a_frame_ring(nic_thread: Option<u64>) {
 /// again RX_POLL_NS after its last run, as at its `rx` port.
 #[test]
 fn only_a_ring_that_does_not_ring_is_looked_at_on_a_timer() {
-    use crate::net::{Net, NetConfig, RX_POLL_NS};
+    use crate::net::RX_POLL_NS;
     use netstack::{Ipv4Address, SocketAddr};
     for rings in [true, false] {
         let (_segment, tenant, _driver) = frame_ring_segment(64 * 1024);
-        let mut net = Net::new(Some(NetConfig {
-            mac: [2, 0, 0, 0, 0, 1],
-            address: Ipv4Address::new(10, 0, 2, 15),
-            prefix: 24,
-            gateway: None,
-        }));
-        net.link(0, 1);
+        let mut net = eth0(1, 15);
         net.link_ring(tenant);
         if rings {
             net.wake_on_frames(3, 2);
@@ -4480,16 +4476,9 @@ fn only_a_ring_that_does_not_ring_is_looked_at_on_a_timer() {
 /// (at the stack's floor), and once the ring is empty nothing is.
 #[test]
 fn frames_a_run_left_in_the_ring_are_due_at_once() {
-    use crate::net::{LIMITS, MIN_POLL_GAP_NS, Net, NetConfig};
-    use netstack::Ipv4Address;
+    use crate::net::{LIMITS, MIN_POLL_GAP_NS};
     let (_segment, tenant, (mut nic_to, _)) = frame_ring_segment(512 * 1024);
-    let mut net = Net::new(Some(NetConfig {
-        mac: [2, 0, 0, 0, 0, 1],
-        address: Ipv4Address::new(10, 0, 2, 15),
-        prefix: 24,
-        gateway: None,
-    }));
-    net.link(0, 1);
+    let mut net = eth0(1, 15);
     net.link_ring(tenant);
     net.wake_on_frames(3, 2);
     let mut host = Model::new(0);
