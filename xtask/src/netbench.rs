@@ -8,11 +8,11 @@
 //!   guest partition's initramfs, the virtio-net driver's modules from
 //!   `/lib/modules/<version>` ([`DRIVERS`] and what they need) loaded by `/init`, `eth0` at the guest's
 //!   address and default route, and the same script.
-//! - Both legs get the same QEMU network ([`qemu_args`]): VT-d, QEMU's virtio-net with the
-//!   modern PCI transport only and `iommu_platform=on` at 00:03.0, on QEMU's user network
-//!   with two ports of 127.0.0.1 (free ones, [`crate::scenario::free_host_ports`]) forwarded
-//!   to the guest: TCP and UDP to [`SERVE_PORT`], TCP to port 80. Nothing listens on
-//!   another interface of the host.
+//! - Both legs get the same machine and network ([`qemu_args`]): [`CPUS`] CPUs, VT-d,
+//!   QEMU's virtio-net with the modern PCI transport only and `iommu_platform=on` at
+//!   00:03.0, on QEMU's user network with two ports of 127.0.0.1 (free ones,
+//!   [`crate::scenario::free_host_ports`]) forwarded to the guest: TCP and UDP to
+//!   [`SERVE_PORT`], TCP to port 80. Nothing listens on another interface of the host.
 //! - The host side ([`measure`], std::net) times everything on the host's clock, so the
 //!   legs always run on real time (QEMU's own network code on the host runs on it anyway):
 //!   bulk TCP both ways in 64 KiB writes, a 64-byte TCP request/response, a 64-byte UDP
@@ -56,8 +56,10 @@ pub const DRIVERS: &[&str] = &["virtio_pci", "virtio_net"];
 
 /// The size of every bulk write (and of the guest's).
 const BLOCK: usize = 64 * 1024;
-/// Bytes of a bulk transfer, and transfers a direction.
-const BULK_BLOCKS: u32 = 64;
+/// Blocks of a bulk transfer (32 MiB: half a second or more here, so that the figure is
+/// the stream's rate, not its first round trips; 4 MiB took under 0.1 s and gave the
+/// guest two thirds of its rate), and transfers a direction.
+const BULK_BLOCKS: u32 = 512;
 const BULK_ROUNDS: usize = 3;
 /// Round trips a round, and rounds, of the TCP and UDP round trips.
 const TRIPS: usize = 100;
@@ -82,14 +84,21 @@ const UDP_TIMEOUT: Duration = Duration::from_secs(1);
 /// costs, as the host side cannot stop QEMU itself).
 const LEG_TIMEOUT: Duration = Duration::from_secs(600);
 
-/// QEMU's arguments for the network of both legs: `ports[0]` (TCP and UDP) forwarded to
-/// [`SERVE_PORT`], `ports[1]` (TCP) to [`HTTP_PORT`], on 127.0.0.1 only.
+/// The CPUs of both legs' machine: the benchmark system's (`[system] cpus` of [`CONFIG`],
+/// the NIC partition on CPU 0 and the guest on CPU 1, as in the default system), and as
+/// many for the stock kernel.
+pub const CPUS: u8 = 2;
+
+/// QEMU's arguments for the machine and network of both legs: [`CPUS`] CPUs, `ports[0]`
+/// (TCP and UDP) forwarded to [`SERVE_PORT`], `ports[1]` (TCP) to [`HTTP_PORT`], on
+/// 127.0.0.1 only.
 pub fn qemu_args(ports: [u16; 2]) -> Vec<String> {
     let [serve, http] = ports;
     let mut args = qemu::iommu();
     args.extend(qemu::nic_on(&format!(
         "user,hostfwd=tcp:127.0.0.1:{serve}-{GUEST_ADDRESS}:{SERVE_PORT},hostfwd=udp:127.0.0.1:{serve}-{GUEST_ADDRESS}:{SERVE_PORT},hostfwd=tcp:127.0.0.1:{http}-{GUEST_ADDRESS}:{HTTP_PORT}"
     )));
+    args.extend(["-smp".to_string(), CPUS.to_string()]);
     args
 }
 
@@ -605,6 +614,14 @@ mod tests {
             args[5],
             "virtio-net-pci,netdev=net0,addr=03.0,disable-legacy=on,iommu_platform=on"
         );
+        assert_eq!(args[6..], ["-smp", "2"]);
+    }
+
+    #[test]
+    fn both_legs_get_the_benchmark_systems_cpus() {
+        let config = crate::workspace_root().join(CONFIG);
+        let system = crate::check_config::load(&config).unwrap();
+        assert_eq!(system.cpus, CPUS);
     }
 
     #[test]
