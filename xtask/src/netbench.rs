@@ -8,9 +8,11 @@
 //!   guest partition's initramfs, the virtio-net driver's modules from
 //!   `/lib/modules/<version>` ([`DRIVERS`] and what they need) loaded by `/init`, `eth0` at the guest's
 //!   address and default route, and the same script.
-//! - Both legs get the same machine and network ([`qemu_args`]): [`CPUS`] CPUs, VT-d,
-//!   QEMU's virtio-net with the modern PCI transport only and `iommu_platform=on` at
-//!   00:03.0, on QEMU's user network with two ports of 127.0.0.1 (free ones,
+//! - Both legs get the same machine and network ([`qemu_args`]): the benchmark system's
+//!   CPUs (`[system] cpus` of [`CONFIG`]: the NIC partition on CPU 0, the guest on CPU 1,
+//!   as in the default system; the stock kernel gets as many), VT-d, QEMU's virtio-net
+//!   with the modern PCI transport only and `iommu_platform=on` at 00:03.0, on QEMU's
+//!   user network with two ports of 127.0.0.1 (free ones,
 //!   [`crate::scenario::free_host_ports`]) forwarded to the guest: TCP and UDP to
 //!   [`SERVE_PORT`], TCP to port 80. Nothing listens on another interface of the host.
 //! - The host side ([`measure`], std::net) times everything on the host's clock, so the
@@ -84,21 +86,16 @@ const UDP_TIMEOUT: Duration = Duration::from_secs(1);
 /// costs, as the host side cannot stop QEMU itself).
 const LEG_TIMEOUT: Duration = Duration::from_secs(600);
 
-/// The CPUs of both legs' machine: the benchmark system's (`[system] cpus` of [`CONFIG`],
-/// the NIC partition on CPU 0 and the guest on CPU 1, as in the default system), and as
-/// many for the stock kernel.
-pub const CPUS: u8 = 2;
-
-/// QEMU's arguments for the machine and network of both legs: [`CPUS`] CPUs, `ports[0]`
+/// QEMU's arguments for the machine and network of both legs: `cpus` CPUs, `ports[0]`
 /// (TCP and UDP) forwarded to [`SERVE_PORT`], `ports[1]` (TCP) to [`HTTP_PORT`], on
 /// 127.0.0.1 only.
-pub fn qemu_args(ports: [u16; 2]) -> Vec<String> {
+pub fn qemu_args(ports: [u16; 2], cpus: u8) -> Vec<String> {
     let [serve, http] = ports;
     let mut args = qemu::iommu();
     args.extend(qemu::nic_on(&format!(
         "user,hostfwd=tcp:127.0.0.1:{serve}-{GUEST_ADDRESS}:{SERVE_PORT},hostfwd=udp:127.0.0.1:{serve}-{GUEST_ADDRESS}:{SERVE_PORT},hostfwd=tcp:127.0.0.1:{http}-{GUEST_ADDRESS}:{HTTP_PORT}"
     )));
-    args.extend(["-smp".to_string(), CPUS.to_string()]);
+    args.extend(["-smp".to_string(), cpus.to_string()]);
     args
 }
 
@@ -273,6 +270,7 @@ fn run_pair(
     dir: &Path,
 ) -> Result<Vec<Metric>> {
     let config = crate::workspace_root().join(CONFIG);
+    let cpus = crate::check_config::load(&config)?.cpus;
     let dir = dir.join("net");
     let mut metrics = leg("guest", |ports| {
         let entries = crate::esp::standard_entries(system, Some(&config))?;
@@ -288,7 +286,7 @@ fn run_pair(
                 deterministic_time: false,
                 com2: qemu::Com2::Unconnected,
                 done_when: Vec::new(),
-                extra_args: qemu_args(ports),
+                extra_args: qemu_args(ports, cpus),
             },
         )
     })?;
@@ -299,7 +297,7 @@ fn run_pair(
         let native = Native {
             init: crate::native::script(&guest.init, &guest.env, &native_setup(&modules), &[]),
             extra_files,
-            qemu_args: qemu_args(ports),
+            qemu_args: qemu_args(ports, cpus),
             timeout: LEG_TIMEOUT,
         };
         let (outcome, _status) =
@@ -595,7 +593,7 @@ mod tests {
 
     #[test]
     fn both_legs_forward_the_same_ports_on_the_loopback_only() {
-        let args = qemu_args([40001, 40002]);
+        let args = qemu_args([40001, 40002], 2);
         assert_eq!(args[..2], ["-device", "intel-iommu"]);
         assert_eq!(args[2], "-netdev");
         let forwards: Vec<&str> = args[3]
@@ -615,13 +613,6 @@ mod tests {
             "virtio-net-pci,netdev=net0,addr=03.0,disable-legacy=on,iommu_platform=on"
         );
         assert_eq!(args[6..], ["-smp", "2"]);
-    }
-
-    #[test]
-    fn both_legs_get_the_benchmark_systems_cpus() {
-        let config = crate::workspace_root().join(CONFIG);
-        let system = crate::check_config::load(&config).unwrap();
-        assert_eq!(system.cpus, CPUS);
     }
 
     #[test]
